@@ -1,0 +1,68 @@
+#include <gtest/gtest.h>
+
+#include <random>
+
+#include "rime/core/math.h"
+
+namespace rime {
+namespace {
+
+Mat3<double> RandomRotation(std::mt19937& rng) {
+  std::normal_distribution<double> n;
+  Vec3d a{n(rng), n(rng), n(rng)}, b{n(rng), n(rng), n(rng)};
+  a /= Norm(a);
+  b -= a * Dot(a, b);
+  b /= Norm(b);
+  return Mat3<double>::FromColumns(a, b, Cross(a, b));
+}
+
+TEST(SymmetricEigen, ReconstructsRandomAndDegenerateMatrices) {
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> u(0, 2);
+  const Vec3d cases[] = {{u(rng), u(rng), u(rng)}, {1, 1, 1}, {2, 0, 0}, {1, 1, 0}, {3, 1e-9, 1e-9}, {0, 0, 0}};
+  for (const Vec3d& d : cases) {
+    const Mat3<double> r = RandomRotation(rng);
+    Mat3<double> diag;
+    diag.m[0][0] = d.x, diag.m[1][1] = d.y, diag.m[2][2] = d.z;
+    const Mat3<double> a = r * diag * Transpose(r);
+    Vec3d values;
+    Mat3<double> vectors;
+    SymmetricEigen(a, values, vectors);
+    EXPECT_GE(values.x, values.y);
+    EXPECT_GE(values.y, values.z);
+    Mat3<double> vd = vectors;
+    for (int i = 0; i < 3; ++i)
+      for (int j = 0; j < 3; ++j) vd.m[i][j] *= values[j];
+    const Mat3<double> back = vd * Transpose(vectors);
+    for (int i = 0; i < 3; ++i)
+      for (int j = 0; j < 3; ++j) EXPECT_NEAR(back.m[i][j], a.m[i][j], 1e-12);
+    const Mat3<double> vtv = Transpose(vectors) * vectors;  // orthonormal
+    for (int i = 0; i < 3; ++i)
+      for (int j = 0; j < 3; ++j) EXPECT_NEAR(vtv.m[i][j], i == j ? 1.0 : 0.0, 1e-12);
+  }
+}
+
+TEST(SymmetricEigen, FloatPrecision) {
+  Mat3<float> a;
+  a.m[0][0] = 2, a.m[1][1] = 1, a.m[2][2] = 0.5f, a.m[0][1] = a.m[1][0] = 0.3f;
+  Vec3f values;
+  Mat3<float> vectors;
+  SymmetricEigen(a, values, vectors);
+  const Vec3f v0 = vectors.Column(0);
+  const Vec3f av = a * v0;
+  EXPECT_NEAR(Norm(av - v0 * values.x), 0.0f, 1e-5f);
+}
+
+TEST(SolveSpd, MatchesDirectProduct) {
+  Mat3<double> a;
+  const double vals[3][3] = {{4, 1, 0.5}, {1, 3, 0.2}, {0.5, 0.2, 2}};
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) a.m[i][j] = vals[i][j];
+  const Vec3d x{0.3, -1.2, 2.5};
+  const Vec3d solved = SolveSpd(a, a * x);
+  EXPECT_NEAR(Norm(solved - x), 0.0, 1e-13);
+  EXPECT_NEAR(Determinant(Mat3<double>::Identity()), 1.0, 0);
+}
+
+}  // namespace
+}  // namespace rime

@@ -1,0 +1,9 @@
+#include "rime/io/scene_cleanup.h"
+
+#include "rime/io/toml_reader.h"
+
+namespace rime::io {
+
+void ParseCleanupSettings(TomlReader& table, CleanupSettings& settings) {}
+
+}  // namespace rime::io

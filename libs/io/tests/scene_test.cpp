@@ -1,0 +1,98 @@
+#include <gtest/gtest.h>
+
+#include "rime/core/error.h"
+#include "rime/io/scene.h"
+
+namespace rime::io {
+namespace {
+
+std::string ErrorOf(const std::string& text) {
+  try {
+    ParseScene(text, "test.toml");
+  } catch (const Error& e) {
+    return e.what();
+  }
+  ADD_FAILURE() << "accepted:\n" << text;
+  return {};
+}
+
+TEST(Scene, DefaultsAndValues) {
+  const Scene s = ParseScene(R"(
+[scene]
+fps = 30
+end_time = 1.5
+[water]
+spacing = 0.01
+[simulation]
+modules = ["gravity", "viscosity"]
+omega = 0.6
+[viscosity]
+beta0 = 0.2
+[[solid]]
+name = "ground"
+shape = "plane"
+size = [2, 2, 1]
+[[solid]]
+shape = "sphere"
+radius = 0.2
+scale = 2
+[[water_block]]
+min = [0, 0, 0.5]
+max = [0.1, 0.1, 0.6]
+velocity = [0, 0, -1]
+)",
+                             "dir/test.toml");
+  EXPECT_EQ(s.info.fps, 30);
+  EXPECT_EQ(s.FrameCount(), 45);
+  EXPECT_EQ(s.fluid.spacing, 0.01);
+  EXPECT_DOUBLE_EQ(s.fluid.particle_mass(), 1e-3);
+  EXPECT_TRUE(s.Enabled("viscosity"));
+  EXPECT_FALSE(s.Enabled("freezing"));
+  EXPECT_EQ(s.viscosity.beta0, 0.2);
+  EXPECT_EQ(s.viscosity.beta1, 10);
+  EXPECT_EQ(s.solver.omega, 0.6);
+  EXPECT_EQ(s.solver.eta, 0.001);
+  ASSERT_EQ(s.solids.size(), 2u);
+  EXPECT_EQ(s.solids[1].name, "solid1");
+  EXPECT_EQ(s.solids[1].transform.scale, Vec3d(2, 2, 2));
+  EXPECT_EQ(s.fluid_blocks[0].velocity, Vec3d(0, 0, -1));
+  EXPECT_EQ(s.Resolve("mesh.obj"), std::filesystem::path("dir/mesh.obj"));
+}
+
+TEST(Scene, RejectsUnknownModuleWithFileAndLine) {
+  const std::string e = ErrorOf("[simulation]\nmodules = [\"gravity\", \"vorticity\"]\n");
+  EXPECT_NE(e.find("unknown name 'vorticity'"), std::string::npos) << e;
+  EXPECT_NE(e.find("test.toml:2"), std::string::npos) << e;
+  EXPECT_NE(e.find("simulation.modules"), std::string::npos) << e;
+}
+
+TEST(Scene, RejectsNegativeSpacingWithFileAndLine) {
+  const std::string e = ErrorOf("[scene]\nfps = 24\n[water]\nspacing = -0.01\n");
+  EXPECT_NE(e.find("test.toml:4"), std::string::npos) << e;
+  EXPECT_NE(e.find("water.spacing"), std::string::npos) << e;
+  EXPECT_NE(e.find("out of range"), std::string::npos) << e;
+  const std::string r = ErrorOf("[[solid]]\nshape = \"sphere\"\nradius = -1\n");
+  EXPECT_NE(r.find("test.toml:3"), std::string::npos) << r;
+  EXPECT_NE(r.find("solid[0].radius"), std::string::npos) << r;
+}
+
+TEST(Scene, RejectsMisspelledKeyWithFileAndLine) {
+  const std::string e = ErrorOf("[water]\nspaceing = 0.01\n");
+  EXPECT_NE(e.find("unknown key 'spaceing'"), std::string::npos) << e;
+  EXPECT_NE(e.find("test.toml:2"), std::string::npos) << e;
+  const std::string top = ErrorOf("[watre]\nspacing = 0.01\n");
+  EXPECT_NE(top.find("unknown key 'watre'"), std::string::npos) << top;
+}
+
+TEST(Scene, OtherChecks) {
+  EXPECT_NE(ErrorOf("[viscosity]\nbeta0 = 0.1\n").find("not enabled"), std::string::npos);
+  EXPECT_NE(ErrorOf("[water]\nspacing = \"small\"\n").find("expected a number"), std::string::npos);
+  EXPECT_NE(ErrorOf("[water]\nspacing = nan\n").find("out of range"), std::string::npos);
+  EXPECT_NE(ErrorOf("[simulation]\nomega = 0.5\nomega = 0.6\n").find("syntax"), std::string::npos);
+  EXPECT_NE(ErrorOf("[[solid]]\nshape = \"mesh\"\n").find("needs a mesh"), std::string::npos);
+  EXPECT_NE(ErrorOf("[[water_block]]\nmin = [0,0,0]\nmax = [1,1,-1]\n").find("max must exceed"), std::string::npos);
+  EXPECT_NE(ErrorOf("[[solid]]\nname = \"a\"\n[[solid]]\nname = \"a\"\n").find("two solids"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace rime::io

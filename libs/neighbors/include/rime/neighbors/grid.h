@@ -1,0 +1,66 @@
+/// @file grid.h
+/// @brief Host-side owner of a uniform grid and CSR neighbor lists on one device.
+///
+/// @code
+/// rime::neighbors::UniformGrid<float> grid(device);
+/// grid.Build(points, n, support_radius);            // points stay where they are
+/// rime::neighbors::NeighborList list(device);
+/// grid.Query(queries, m, support_radius, /*exclude_self=*/false, list);
+/// // neighbors of query i: list.indices[list.offsets[i] .. list.offsets[i+1])
+/// @endcode
+#pragma once
+
+#include <cstdint>
+
+#include "rime/exec/memory.h"
+#include "rime/neighbors/grid_kernels.h"
+
+namespace rime::neighbors {
+
+/// Compressed sparse rows: offsets has queries+1 entries.
+struct NeighborList {
+  explicit NeighborList(const exec::Device& device) : offsets(device), indices(device) {}
+  exec::DeviceArray<std::uint32_t> offsets;
+  exec::DeviceArray<std::uint32_t> indices;
+  std::uint64_t pairs() const { return indices.size(); }
+};
+
+template <class T>
+class UniformGrid {
+ public:
+  explicit UniformGrid(const exec::Device& device);
+
+  /// Bins `points` (device pointer, must stay valid while the grid is used) in cells of
+  /// size `cell_size`. Throws rime::Error if the cloud spans more than 2^21 cells per axis.
+  void Build(const Vec3<T>* points, Index n, T cell_size);
+
+  /// sorted slot -> original index: the Z-curve order, for callers that reorder their arrays.
+  const std::uint32_t* order() const { return sorted_index_.data(); }
+  GridView<T> view() const { return view_; }
+  Index size() const { return view_.count; }
+  T cell_size() const { return cell_size_; }
+  std::size_t cell_count() const { return cells_; }
+
+  /// CSR lists of grid points within `radius` (<= cell size) of each query position.
+  void Query(const Vec3<T>* queries, Index m, T radius, bool exclude_self, NeighborList& out) const;
+
+ private:
+  exec::Device device_;
+  T cell_size_ = 0;
+  std::size_t cells_ = 0;
+  GridView<T> view_;
+  exec::DeviceArray<std::uint64_t> keys_;
+  exec::DeviceArray<std::uint32_t> sorted_index_;
+  exec::DeviceArray<std::uint32_t> flags_;
+  exec::DeviceArray<std::uint32_t> cell_of_slot_;
+  exec::DeviceArray<std::uint32_t> cell_start_;
+  exec::DeviceArray<std::uint64_t> table_keys_;
+  exec::DeviceArray<std::uint32_t> table_cells_;
+  exec::DeviceArray<T> bounds_scratch_;
+  mutable exec::DeviceArray<std::uint32_t> counts_;
+};
+
+extern template class UniformGrid<float>;
+extern template class UniformGrid<double>;
+
+}  // namespace rime::neighbors

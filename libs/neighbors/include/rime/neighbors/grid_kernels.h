@@ -1,0 +1,190 @@
+/// @file grid_kernels.h
+/// @brief Uniform-grid neighbor search as host/device kernels (spec §2).
+///
+/// Points are binned in cubic cells of size >= the search radius, keyed by the Morton code of the
+/// cell (so sorting by key orders particles along a Z curve for cache locality). Occupied cells are
+/// found through an open-addressing hash table, so memory is proportional to the number of points,
+/// not to the bounding-box volume. A query visits the 27 cells around a position.
+#pragma once
+
+#include <cstdint>
+
+#include "rime/core/hd.h"
+#include "rime/core/math.h"
+#include "rime/exec/atomic.h"
+
+namespace rime::neighbors {
+
+inline constexpr std::uint64_t kEmptySlot = ~0ULL;
+inline constexpr int kMortonBits = 21;  // per axis
+inline constexpr std::int64_t kMaxCellsPerAxis = (1LL << kMortonBits) - 2;
+
+RIME_HDI std::uint64_t SpreadBits(std::uint64_t v) {
+  v &= 0x1fffff;
+  v = (v | v << 32) & 0x1f00000000ffffULL;
+  v = (v | v << 16) & 0x1f0000ff0000ffULL;
+  v = (v | v << 8) & 0x100f00f00f00f00fULL;
+  v = (v | v << 4) & 0x10c30c30c30c30c3ULL;
+  v = (v | v << 2) & 0x1249249249249249ULL;
+  return v;
+}
+RIME_HDI std::uint64_t MortonKey(std::int64_t ix, std::int64_t iy, std::int64_t iz) {
+  return SpreadBits(std::uint64_t(ix)) | SpreadBits(std::uint64_t(iy)) << 1 | SpreadBits(std::uint64_t(iz)) << 2;
+}
+RIME_HDI std::uint32_t HashSlot(std::uint64_t key, std::uint32_t mask) {
+  key ^= key >> 33;
+  key *= 0xff51afd7ed558ccdULL;
+  key ^= key >> 33;
+  return static_cast<std::uint32_t>(key) & mask;
+}
+
+/// Read-only view of a built grid, passed by value into kernels.
+template <class T>
+struct GridView {
+  Vec3<T> origin;  // world position of cell (1,1,1)'s lower corner minus one cell (cells start at 1)
+  T inv_cell = 0;
+  const std::uint64_t* table_keys = nullptr;   // hash slot -> cell key (kEmptySlot = empty)
+  const std::uint32_t* table_cells = nullptr;  // hash slot -> cell index
+  std::uint32_t table_mask = 0;
+  const std::uint32_t* cell_start = nullptr;   // cell index -> first sorted slot; cell_start[cells] = n
+  const std::uint32_t* sorted_index = nullptr; // sorted slot -> original point index
+  const Vec3<T>* points = nullptr;             // original point positions
+  std::uint32_t count = 0;
+
+  RIME_HDI std::int64_t CellCoord(T x, T o) const { return static_cast<std::int64_t>(std::floor((x - o) * inv_cell)); }
+
+  /// Calls f(j, r_ij = x - points[j], r2) for every point j with |x - points[j]| < radius.
+  template <class F>
+  RIME_HDI void ForEachNeighbor(const Vec3<T>& x, T radius, F&& f) const {
+    if (count == 0) return;
+    const T r2max = radius * radius;
+    const std::int64_t cx = CellCoord(x.x, origin.x), cy = CellCoord(x.y, origin.y), cz = CellCoord(x.z, origin.z);
+    for (std::int64_t dz = -1; dz <= 1; ++dz)
+      for (std::int64_t dy = -1; dy <= 1; ++dy)
+        for (std::int64_t dx = -1; dx <= 1; ++dx) {
+          const std::int64_t ix = cx + dx, iy = cy + dy, iz = cz + dz;
+          if (ix < 0 || iy < 0 || iz < 0 || ix > kMaxCellsPerAxis || iy > kMaxCellsPerAxis || iz > kMaxCellsPerAxis) continue;
+          const std::uint64_t key = MortonKey(ix, iy, iz);
+          std::uint32_t slot = HashSlot(key, table_mask);
+          while (true) {
+            const std::uint64_t k = table_keys[slot];
+            if (k == kEmptySlot) break;
+            if (k == key) {
+              const std::uint32_t cell = table_cells[slot];
+              for (std::uint32_t s = cell_start[cell], e = cell_start[cell + 1]; s < e; ++s) {
+                const std::uint32_t j = sorted_index[s];
+                const Vec3<T> r = x - points[j];
+                const T r2 = Dot(r, r);
+                if (r2 < r2max) f(j, r, r2);
+              }
+              break;
+            }
+            slot = (slot + 1) & table_mask;
+          }
+        }
+  }
+};
+
+namespace kernels {
+
+/// keys[i] = Morton key of point i's cell; values[i] = i.
+template <class T>
+struct CellKeys {
+  const Vec3<T>* points;
+  Vec3<T> origin;
+  T inv_cell;
+  std::uint64_t* keys;
+  std::uint32_t* values;
+  RIME_HD void operator()(Index i) const {
+    const Vec3<T> p = points[i];
+    const auto c = [&](T x, T o) {
+      std::int64_t v = static_cast<std::int64_t>(std::floor((x - o) * inv_cell));
+      return v < 0 ? 0 : (v > kMaxCellsPerAxis ? kMaxCellsPerAxis : v);
+    };
+    keys[i] = MortonKey(c(p.x, origin.x), c(p.y, origin.y), c(p.z, origin.z));
+    values[i] = static_cast<std::uint32_t>(i);
+  }
+};
+
+/// flags[i] = 1 where sorted slot i starts a new cell.
+struct MarkCellStarts {
+  const std::uint64_t* sorted_keys;
+  std::uint32_t* flags;
+  RIME_HD void operator()(Index i) const { flags[i] = (i == 0 || sorted_keys[i] != sorted_keys[i - 1]) ? 1u : 0u; }
+};
+
+/// For every cell start: record the start slot and insert the cell into the hash table.
+struct InsertCells {
+  const std::uint64_t* sorted_keys;
+  const std::uint32_t* flags;
+  const std::uint32_t* cell_of_slot;  // exclusive scan of flags
+  std::uint32_t* cell_start;
+  std::uint64_t* table_keys;
+  std::uint32_t* table_cells;
+  std::uint32_t table_mask;
+  RIME_HD void operator()(Index i) const {
+    if (!flags[i]) return;
+    const std::uint32_t cell = cell_of_slot[i];
+    cell_start[cell] = static_cast<std::uint32_t>(i);
+    const std::uint64_t key = sorted_keys[i];
+    std::uint32_t slot = HashSlot(key, table_mask);
+    while (exec::AtomicCas(&table_keys[slot], kEmptySlot, key) != kEmptySlot) slot = (slot + 1) & table_mask;
+    table_cells[slot] = cell;
+  }
+};
+
+/// counts[i] = number of grid points within radius of queries[i] (excluding i itself if asked).
+template <class T>
+struct CountNeighbors {
+  GridView<T> grid;
+  const Vec3<T>* queries;
+  T radius;
+  bool exclude_self;
+  std::uint32_t* counts;
+  RIME_HD void operator()(Index i) const {
+    std::uint32_t c = 0;
+    grid.ForEachNeighbor(queries[i], radius, [&](std::uint32_t j, const Vec3<T>&, T) { c += (!exclude_self || j != i); });
+    counts[i] = c;
+  }
+};
+
+/// Writes the neighbor indices of queries[i] at offsets[i].
+template <class T>
+struct FillNeighbors {
+  GridView<T> grid;
+  const Vec3<T>* queries;
+  T radius;
+  bool exclude_self;
+  const std::uint32_t* offsets;
+  std::uint32_t* indices;
+  RIME_HD void operator()(Index i) const {
+    std::uint32_t k = offsets[i];
+    grid.ForEachNeighbor(queries[i], radius, [&](std::uint32_t j, const Vec3<T>&, T) {
+      if (!exclude_self || j != i) indices[k++] = j;
+    });
+  }
+};
+
+/// Component-wise copy for bounding-box reductions: out[a*n + i] = -points[i][a] (a < 3) and
+/// points[i][a-3] (a >= 3), so one Max over each third gives -min and max.
+template <class T>
+struct BoundsComponents {
+  const Vec3<T>* points;
+  Index n;
+  T* out;
+  RIME_HD void operator()(Index i) const {
+    const Vec3<T> p = points[i];
+    out[i] = -p.x, out[n + i] = -p.y, out[2 * n + i] = -p.z;
+    out[3 * n + i] = p.x, out[4 * n + i] = p.y, out[5 * n + i] = p.z;
+  }
+};
+
+}  // namespace kernels
+}  // namespace rime::neighbors
+
+#define RIME_NEIGHBORS_KERNELS(X)                                                                    \
+  X(rime::neighbors::kernels::CellKeys<float>) X(rime::neighbors::kernels::CellKeys<double>)        \
+  X(rime::neighbors::kernels::MarkCellStarts) X(rime::neighbors::kernels::InsertCells)              \
+  X(rime::neighbors::kernels::CountNeighbors<float>) X(rime::neighbors::kernels::CountNeighbors<double>) \
+  X(rime::neighbors::kernels::FillNeighbors<float>) X(rime::neighbors::kernels::FillNeighbors<double>)   \
+  X(rime::neighbors::kernels::BoundsComponents<float>) X(rime::neighbors::kernels::BoundsComponents<double>)

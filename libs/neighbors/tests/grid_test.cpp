@@ -1,0 +1,100 @@
+// Neighbor lists against an O(n^2) brute-force search (spec §2).
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <random>
+
+#include "rime/core/error.h"
+#include "rime/neighbors/grid.h"
+
+namespace rime::neighbors {
+namespace {
+
+template <class T>
+std::vector<Vec3<T>> RandomCloud(std::size_t n, bool clustered, T offset, std::mt19937& rng) {
+  std::uniform_real_distribution<double> u(0, 1);
+  std::normal_distribution<double> g(0, 0.02);
+  std::vector<Vec3<T>> p(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    if (clustered) {  // a few dense blobs, duplicates and a far outlier
+      const int c = i % 4;
+      p[i] = Vec3<T>(T(offset + 0.3 * c + g(rng)), T(offset + g(rng)), T(offset + 0.1 * c + g(rng)));
+      if (i % 97 == 0 && i > 0) p[i] = p[i - 1];
+    } else {
+      p[i] = Vec3<T>(T(offset + u(rng)), T(offset + u(rng)), T(offset + 0.5 * u(rng)));
+    }
+  }
+  if (clustered && n > 10) p[n - 1] = Vec3<T>(T(offset + 3), T(offset + 3), T(offset + 3));
+  return p;
+}
+
+template <class T>
+void CheckAgainstBruteForce(std::size_t n, std::size_t m, bool clustered, T radius, T offset, bool self) {
+  std::mt19937 rng(1234 + n);
+  const exec::Device device = exec::Device::Cpu();
+  const auto points = RandomCloud<T>(n, clustered, offset, rng);
+  const auto queries = self ? points : RandomCloud<T>(m, clustered, offset, rng);
+  exec::DeviceArray<Vec3<T>> d_points(device, points), d_queries(device, queries);
+  UniformGrid<T> grid(device);
+  grid.Build(d_points.data(), points.size(), radius);
+  NeighborList list(device);
+  grid.Query(d_queries.data(), queries.size(), radius, self, list);
+  const auto offsets = list.offsets.ToHost();
+  const auto indices = list.indices.ToHost();
+  std::uint64_t pairs = 0;
+  for (std::size_t i = 0; i < queries.size(); ++i) {
+    std::vector<std::uint32_t> expected;
+    for (std::size_t j = 0; j < points.size(); ++j) {
+      if (self && i == j) continue;
+      const Vec3<T> r = queries[i] - points[j];
+      if (Dot(r, r) < radius * radius) expected.push_back(std::uint32_t(j));
+    }
+    std::vector<std::uint32_t> got(indices.begin() + offsets[i], indices.begin() + offsets[i + 1]);
+    std::sort(got.begin(), got.end());
+    ASSERT_EQ(got, expected) << "query " << i << " (n=" << n << ", clustered=" << clustered << ")";
+    pairs += expected.size();
+  }
+  EXPECT_EQ(list.pairs(), pairs);
+}
+
+TEST(UniformGrid, MatchesBruteForceOnRandomClouds) {
+  for (std::size_t n : {0, 1, 2, 500, 5000}) CheckAgainstBruteForce<float>(n, 0, false, 0.06f, 0.0f, true);
+  CheckAgainstBruteForce<double>(3000, 0, false, 0.05, 0.0, true);
+}
+
+TEST(UniformGrid, MatchesBruteForceOnClusteredClouds) {
+  CheckAgainstBruteForce<float>(4000, 0, true, 0.03f, 0.0f, true);
+  CheckAgainstBruteForce<double>(4000, 0, true, 0.01, -5.0, true);
+}
+
+TEST(UniformGrid, SeparateQuerySetAndFarFromOrigin) {
+  CheckAgainstBruteForce<float>(3000, 2000, false, 0.07f, 0.0f, false);
+  CheckAgainstBruteForce<double>(3000, 2000, false, 0.07, 10000.0, false);  // 10 km away
+}
+
+TEST(UniformGrid, OrderIsAPermutationAlongTheCurve) {
+  std::mt19937 rng(9);
+  const exec::Device device = exec::Device::Cpu();
+  const auto points = RandomCloud<float>(1000, false, 0, rng);
+  exec::DeviceArray<Vec3f> d(device, points);
+  UniformGrid<float> grid(device);
+  grid.Build(d.data(), points.size(), 0.1f);
+  std::vector<std::uint32_t> order(grid.order(), grid.order() + points.size());
+  std::sort(order.begin(), order.end());
+  for (std::uint32_t i = 0; i < order.size(); ++i) ASSERT_EQ(order[i], i);
+  EXPECT_GT(grid.cell_count(), 10u);
+}
+
+TEST(UniformGrid, RejectsNaNAndHugeExtents) {
+  const exec::Device device = exec::Device::Cpu();
+  std::vector<Vec3f> bad{{0, 0, 0}, {NAN, 0, 0}};
+  exec::DeviceArray<Vec3f> d(device, bad);
+  UniformGrid<float> grid(device);
+  EXPECT_THROW(grid.Build(d.data(), 2, 0.1f), Error);
+  std::vector<Vec3f> far{{0, 0, 0}, {1e6f, 0, 0}};
+  exec::DeviceArray<Vec3f> f(device, far);
+  EXPECT_THROW(grid.Build(f.data(), 2, 0.01f), Error);
+}
+
+}  // namespace
+}  // namespace rime::neighbors

@@ -1,0 +1,29 @@
+#!/usr/bin/env bash
+# Installs the Debian 12 packages Rime builds against (idempotent: installs only what is missing),
+# then configures and builds the given CMake preset.
+#   scripts/setup.sh [PRESET]      (default preset: release)
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+PACKAGES=(
+  g++ cmake ninja-build pkg-config
+  libeigen3-dev libtbb-dev libfmt-dev libxxhash-dev
+  libhdf5-dev hdf5-tools libtomlplusplus-dev libcli11-dev libgtest-dev nlohmann-json3-dev
+  libassimp-dev libopenvdb-dev libopenvdb-tools libboost-iostreams-dev libcgal-dev
+)
+
+missing=()
+for p in "${PACKAGES[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+if ((${#missing[@]})); then
+  echo "setup: installing ${#missing[@]} Debian packages: ${missing[*]}"
+  SUDO=""
+  [ "$(id -u)" -ne 0 ] && SUDO="sudo"
+  $SUDO apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+fi
+
+PRESET="${1:-release}"
+cmake --preset "$PRESET" >/dev/null
+cmake --build --preset "$PRESET"

@@ -1,0 +1,85 @@
+#include "tool.h"
+
+#include <sys/resource.h>
+
+#include <fmt/format.h>
+
+#include <cstdio>
+#include <regex>
+
+#include "rime/core/atomic_file.h"
+#include "rime/core/error.h"
+#include "rime/core/log.h"
+#include "rime/exec/device.h"
+#include "rime/version.h"
+
+namespace rime::tool {
+
+void Setup(CLI::App& app, const std::string& name, CommonOptions& options, unsigned flags) {
+  log::SetProgramName(name);
+  app.name(name);
+  app.set_version_flag("--version", std::string("Rime ") + RIME_VERSION_STRING);
+  app.add_flag("-q,--quiet", options.quiet, "Print only warnings and errors");
+  app.add_flag("-v,--verbose", options.verbose, "Print debug details");
+  if (flags & kThreads) app.add_option("-j,--threads", options.threads, "CPU threads (default: all cores)")->check(CLI::NonNegativeNumber);
+  if (flags & kDevice)
+    app.add_option("--device", options.device, "Where to compute: auto (a GPU when usable, else CPU), cpu, cuda")
+        ->check(CLI::IsMember({"auto", "cpu", "cuda"}))
+        ->capture_default_str();
+  if (flags & kFrames) app.add_option("--frames", options.frames, "Frame range A-B (or a single frame A); default: all");
+  if (flags & kJsonSummary) app.add_option("--json-summary", options.json_summary, "Also write the end-of-run summary as JSON to FILE");
+  app.footer(
+      "Exit codes: 0 ok, 1 internal failure, 2 bad command line, 3 bad input file or scene value, 4 simulation "
+      "diverged, 5 cannot write output, 6 requested device unusable, 130 interrupted.");
+}
+
+void Apply(const CommonOptions& options) {
+  if (options.quiet) log::SetLevel(log::Level::kWarning);
+  if (options.verbose) log::SetLevel(log::Level::kDebug);
+  if (options.threads > 0) exec::SetCpuThreads(options.threads);
+}
+
+int Main(CLI::App& app, int argc, char** argv, const CommonOptions& options, const std::function<int()>& body) {
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e);
+  }
+  try {
+    Apply(options);
+    return body();
+  } catch (const Error& e) {
+    std::fprintf(stderr, "%s: error: %s\n", log::ProgramName().c_str(), e.what());
+    return static_cast<int>(e.code());
+  } catch (const std::bad_alloc&) {
+    std::fprintf(stderr, "%s: error: out of memory\n", log::ProgramName().c_str());
+    return static_cast<int>(ExitCode::kFailure);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "%s: error: internal failure: %s\n", log::ProgramName().c_str(), e.what());
+    return static_cast<int>(ExitCode::kFailure);
+  }
+}
+
+FrameRange ParseFrames(const std::string& text) {
+  FrameRange range;
+  if (text.empty()) return range;
+  std::smatch m;
+  static const std::regex pattern(R"(^\s*(\d+)\s*(?:-\s*(\d+))?\s*$)");
+  if (!std::regex_match(text, m, pattern)) throw Error(ExitCode::kUsage, "expected a frame range like 10-20 or 7", "--frames " + text);
+  range.first = std::stoll(m[1]);
+  range.last = m[2].matched ? std::stoll(m[2]) : range.first;
+  if (range.last < range.first) throw Error(ExitCode::kUsage, "frame range ends before it starts", "--frames " + text);
+  return range;
+}
+
+void WriteSummary(const CommonOptions& options, const nlohmann::json& summary) {
+  if (!options.json_summary.empty()) WriteFileAtomically(options.json_summary, summary.dump(2) + "\n");
+}
+
+std::uint64_t PeakMemoryBytes() {
+  rusage usage{};
+  getrusage(RUSAGE_SELF, &usage);
+  return static_cast<std::uint64_t>(usage.ru_maxrss) * 1024;
+}
+
+}  // namespace rime::tool
