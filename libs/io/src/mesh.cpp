@@ -1,0 +1,1 @@
+// OBJ / PLY reading and writing (see rime/io/mesh.h).

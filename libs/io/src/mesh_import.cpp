@@ -1,0 +1,1 @@
+// Implemented by the boundary stage work (assimp import).
