@@ -7,6 +7,7 @@
 
 #include "rime/core/error.h"
 #include "rime/exec/kernel_list.h"
+#include "rime/exec/kernels.h"
 #include "rime/exec/parallel.h"
 
 RIME_NEIGHBORS_KERNELS(RIME_INSTANTIATE_CPU_KERNEL)
@@ -81,6 +82,12 @@ void UniformGrid<T>::Build(const Vec3<T>* points, Index n, T cell_size) {
   view_.table_mask = table_size - 1;
   view_.cell_start = cell_start_.data();
   view_.sorted_index = sorted_index_.data();
+}
+
+template <class T>
+void UniformGrid<T>::AdoptOrder(const Vec3<T>* reordered_points) {
+  view_.points = reordered_points;
+  exec::ParallelFor(device_, view_.count, exec::IotaKernel{sorted_index_.data()});
 }
 
 template <class T>

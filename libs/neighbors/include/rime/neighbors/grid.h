@@ -41,6 +41,10 @@ class UniformGrid {
   T cell_size() const { return cell_size_; }
   std::size_t cell_count() const { return cells_; }
 
+  /// After the caller gathered its arrays into order() (point k of the new array is old point
+  /// order()[k]), re-points the grid at the reordered array so no rebuild is needed.
+  void AdoptOrder(const Vec3<T>* reordered_points);
+
   /// CSR lists of grid points within `radius` (<= cell size) of each query position.
   void Query(const Vec3<T>* queries, Index m, T radius, bool exclude_self, NeighborList& out) const;
 
