@@ -1,0 +1,61 @@
+// Small scenes for the solver tests: an open box of single-layer boundary particles (spacing
+// d_b = 0.5 d_p, spec §3) and a water column on a lattice 1.1 d_p from the walls.
+#pragma once
+
+#include <cmath>
+#include <string>
+#include <vector>
+
+#include "rime/io/particles.h"
+#include "rime/io/scene.h"
+
+namespace rime::sph::test {
+
+/// Open-top box [0,w]x[0,d]x[0,height] sampled on its floor and four walls.
+inline io::ParticleFrame BoxBoundary(double dp, double w, double d, double height, double ratio = 0.5) {
+  const double db = ratio * dp;
+  std::vector<Vec3d> p;
+  // Walls exactly at 0 and w (d): the spacing is adjusted to divide the extent.
+  const int nx = int(std::ceil(w / db - 1e-9)), ny = int(std::ceil(d / db - 1e-9)), nz = int(std::ceil(height / db - 1e-9));
+  const double sx = w / nx, sy = d / ny, sz = height / nz;
+  for (int i = 0; i <= nx; ++i)
+    for (int j = 0; j <= ny; ++j) p.push_back({i * sx, j * sy, 0});  // floor
+  for (int k = 1; k <= nz; ++k) {
+    for (int i = 0; i <= nx; ++i) {
+      p.push_back({i * sx, 0, k * sz});
+      p.push_back({i * sx, d, k * sz});
+    }
+    for (int j = 1; j < ny; ++j) {
+      p.push_back({0, j * sy, k * sz});
+      p.push_back({w, j * sy, k * sz});
+    }
+  }
+  io::ParticleFrame f;
+  f.kind = "boundary";
+  f.spacing = dp;
+  f.SetPositions(p);
+  return f;
+}
+
+/// A scene with a water block of nx*ny*nz particles standing 1.1 d_p from the walls of a box
+/// just large enough to hold it, walls `wall_height` high.
+inline io::Scene ColumnScene(double dp, int nx, int ny, int nz, double wall_height) {
+  io::Scene scene;
+  scene.fluid.spacing = dp;
+  scene.modules = {"gravity"};
+  scene.solver.time_step = "fixed";
+  scene.solver.dt = 0.002;
+  io::FluidBlock block;
+  block.min = {1.1 * dp, 1.1 * dp, 1.1 * dp};
+  block.max = {block.min.x + (nx - 1) * dp, block.min.y + (ny - 1) * dp, block.min.z + (nz - 1) * dp};
+  scene.fluid_blocks.push_back(block);
+  io::SolidObject box;
+  box.name = "box";
+  scene.solids.push_back(box);
+  (void)wall_height;
+  return scene;
+}
+
+inline double BoxWidth(double dp, int n) { return (n - 1) * dp + 2.2 * dp; }
+
+}  // namespace rime::sph::test
