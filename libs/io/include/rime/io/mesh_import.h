@@ -3,6 +3,7 @@
 #pragma once
 
 #include <filesystem>
+#include <vector>
 
 #include "rime/io/mesh.h"
 
@@ -20,6 +21,12 @@ struct ImportStats {
 
 /// Throws rime::Error(kBadInput) naming the file: missing, unsupported format, no triangles,
 /// NaN/Inf coordinates.
+/// With merge_meshes = false the result is still one mesh (all parts, vertices not shared between
+/// parts); use ImportMeshParts to keep the parts apart.
 TriMesh ImportMesh(const std::filesystem::path& path, const ImportOptions& options = {}, ImportStats* stats = nullptr);
+
+/// Every mesh of the file as its own TriMesh (after baking the node transforms; assimp may combine
+/// meshes that share a material). Same checks and errors as ImportMesh.
+std::vector<TriMesh> ImportMeshParts(const std::filesystem::path& path, ImportStats* stats = nullptr);
 
 }  // namespace rime::io
