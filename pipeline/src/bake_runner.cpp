@@ -1,0 +1,421 @@
+#include "bake_runner.h"
+
+#include <algorithm>
+#include <chrono>
+#include <condition_variable>
+#include <fmt/format.h>
+#include <fstream>
+#include <map>
+#include <mutex>
+#include <set>
+#include <sstream>
+#include <thread>
+
+#include "process.h"
+#include "rime/core/atomic_file.h"
+#include "rime/core/error.h"
+#include "rime/core/hash.h"
+#include "rime/core/log.h"
+#include "rime/core/progress.h"
+#include "rime/io/particles.h"
+
+namespace fs = std::filesystem;
+using Clock = std::chrono::steady_clock;
+
+namespace rime::bake {
+namespace {
+
+std::string ReadSmallFile(const fs::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::stringstream text;
+  text << in.rdbuf();
+  return text.str();
+}
+
+// Last non-empty line of a log: stage tools end a failure with `tool: error: ...`.
+std::string LastLine(const fs::path& log) {
+  std::ifstream in(log);
+  std::string line, last;
+  while (std::getline(in, line))
+    if (line.find_first_not_of(" \t\r") != std::string::npos) last = line;
+  return last;
+}
+
+std::string DescribeComponent(const std::string& component) {
+  if (component == "tool") return "the tool binary";
+  if (component == "command") return "the command line";
+  if (component.rfind("scene:", 0) == 0) return fmt::format("scene section [{}]", component.substr(6));
+  if (component.rfind("input:", 0) == 0) return fmt::format("input {}", component.substr(6));
+  return component;
+}
+
+std::string FrameSuffix(const Job& job) { return job.frame >= 0 ? fmt::format(" on frame {}", job.frame) : std::string(); }
+
+enum class Status { kPending, kRunning, kDone, kFailed, kNotRun };
+
+}  // namespace
+
+struct Runner::Impl {
+  explicit Impl(Runner& r) : runner(r) {}
+  Runner& runner;
+  std::mutex mutex;
+  std::condition_variable wake;
+  std::mutex save_mutex;
+  std::vector<Status> status;
+  std::set<std::size_t> forced;  // --only / --force: run even when up to date
+  BakeResult result;
+  bool stop = false;
+
+  fs::path Marker(const Job& job) const { return runner.layout_.state_folder() / "incomplete" / job.id; }
+
+  void Save() {
+    std::lock_guard lock(save_mutex);
+    runner.state_.Save();
+  }
+
+  void Fail(const Job& job, int exit_code, std::string message) {
+    std::lock_guard lock(mutex);
+    if (result.failure.empty()) {
+      result.failure = std::move(message);
+      result.exit_code = exit_code;
+    }
+    stop = true;
+  }
+
+  /// Runs one job if stale; returns its final status. Called on a worker thread.
+  Status Execute(std::size_t index) {
+    const Job& job = runner.jobs_[index];
+    const Verdict verdict = runner.Evaluate(job);
+    StageSummary& summary = result.stages[static_cast<int>(job.stage)];
+    if (!verdict.stale() && !forced.count(index)) {
+      log::Debug("{}: up to date", job.id);
+      std::lock_guard lock(mutex);
+      ++summary.cached;
+      return Status::kDone;
+    }
+    if (runner.options_.explain) {
+      const auto reasons = verdict.stale() ? verdict.reasons : std::vector<std::string>{"requested (--only/--force)"};
+      log::Info("{} runs: {}", job.id, fmt::join(reasons, "; "));
+    }
+    if (!verdict.missing_inputs.empty()) {
+      Fail(job, kExitStageFailed,
+           fmt::format("stage {}{} cannot run: input {} is missing", StageName(job.stage), FrameSuffix(job), verdict.missing_inputs.front()));
+      return Status::kFailed;
+    }
+
+    std::vector<std::string> args = job.args;
+    const fs::path marker = Marker(job);
+    if (job.resumable) {
+      // Resume only a run of the same key that was cut off; anything else restarts from scratch so
+      // frames computed with other parameters cannot survive.
+      const bool same_run_interrupted = fs::exists(marker) && ReadSmallFile(marker) == verdict.fresh.key;
+      if (same_run_interrupted && !job.outputs.empty() && fs::exists(job.outputs.front())) {
+        args.push_back("--resume");
+        log::Info("{}: continuing the interrupted run from its last complete frame (--resume)", job.id);
+      } else {
+        std::error_code ec;
+        fs::remove_all(job.resume_folder, ec);
+      }
+    }
+    // Snakemake-style incomplete marker: present while the job runs, removed after success.
+    fs::create_directories(marker.parent_path());
+    WriteFileAtomically(marker, verdict.fresh.key);
+
+    log::Debug("{}: {}", job.id, CommandLine(job.program, args));
+    const auto start = Clock::now();
+    const int code = RunProcess(job.program, args, job.log);
+    const double seconds = std::chrono::duration<double>(Clock::now() - start).count();
+    {
+      std::lock_guard lock(mutex);
+      summary.seconds += seconds;
+    }
+    if (code != 0) {
+      if (Interrupted()) {
+        Fail(job, static_cast<int>(ExitCode::kInterrupted),
+             fmt::format("interrupted during stage {}{}; rerun the same command to continue (log: {})", StageName(job.stage),
+                         FrameSuffix(job), job.log.string()));
+      } else {
+        const std::string last = LastLine(job.log);
+        Fail(job, kExitStageFailed,
+             fmt::format("stage {} failed{} ({} exited with code {}{}); log: {}", StageName(job.stage), FrameSuffix(job), job.tool_name, code,
+                         last.empty() ? "" : ": " + last, job.log.string()));
+      }
+      return Status::kFailed;
+    }
+
+    JobRecord record = verdict.fresh;
+    record.seconds = seconds;
+    for (const auto& output : job.outputs) {
+      const auto hash = runner.state_.ContentHash(output);
+      if (!hash) {
+        Fail(job, kExitStageFailed,
+             fmt::format("stage {} failed{}: {} exited without writing {}; log: {}", StageName(job.stage), FrameSuffix(job), job.tool_name,
+                         output.string(), job.log.string()));
+        return Status::kFailed;
+      }
+      record.outputs[runner.state_.Name(output)] = *hash;
+    }
+    for (const auto& output : job.optional_outputs)
+      if (const auto hash = runner.state_.ContentHash(output)) record.outputs[runner.state_.Name(output)] = *hash;
+    runner.state_.SetRecord(job.id, std::move(record));
+    Save();
+    std::error_code ec;
+    fs::remove(marker, ec);
+    std::lock_guard lock(mutex);
+    ++summary.ran;
+    return Status::kDone;
+  }
+};
+
+Runner::Runner(const SceneDocument& doc, const BakeLayout& layout, std::vector<Job> jobs, RunOptions options)
+    : doc_(doc), layout_(layout), jobs_(std::move(jobs)), options_(options), state_(layout.output, layout.state_folder() / "state.json") {
+  state_.Load();
+}
+
+Verdict Runner::Evaluate(const Job& job) {
+  Verdict v;
+  auto& c = v.fresh.components;
+  c["tool"] = state_.ContentHash(job.program).value_or("missing");
+  std::string command = job.tool_name;
+  for (const auto& a : job.key_args) command += '\0' + a;
+  c["command"] = HexHash(Hash64(command));
+  for (const auto& s : job.sections) c["scene:" + s] = doc_.SectionHash(s);
+  for (const auto& input : job.inputs) {
+    const auto hash = state_.ContentHash(input);
+    if (!hash) v.missing_inputs.push_back(input.string());
+    c["input:" + state_.Name(input)] = hash.value_or("missing");
+  }
+  for (const auto& input : job.optional_inputs)
+    if (const auto hash = state_.ContentHash(input)) c["input:" + state_.Name(input)] = *hash;
+  std::string all;
+  for (const auto& [name, value] : c) all += name + "=" + value + "\n";
+  v.fresh.key = HexHash(Hash64(all));
+
+  if (fs::exists(layout_.state_folder() / "incomplete" / job.id)) v.reasons.push_back("left incomplete by an interrupted or failed run");
+  const auto record = state_.Record(job.id);
+  if (!record) {
+    if (v.reasons.empty()) v.reasons.push_back("never built");
+    return v;
+  }
+  if (record->key != v.fresh.key) {
+    for (const auto& [name, value] : c) {
+      const auto old = record->components.find(name);
+      if (old == record->components.end()) v.reasons.push_back(DescribeComponent(name) + " is new");
+      else if (old->second != value) v.reasons.push_back(DescribeComponent(name) + (value == "missing" ? " is missing" : " changed"));
+    }
+    for (const auto& [name, value] : record->components)
+      if (!c.count(name)) v.reasons.push_back(DescribeComponent(name) + " is no longer used");
+  }
+  for (const auto& output : job.outputs) {
+    const auto hash = state_.ContentHash(output);
+    const auto recorded = record->outputs.find(state_.Name(output));
+    if (!hash) v.reasons.push_back(fmt::format("output {} is missing", output.string()));
+    else if (recorded != record->outputs.end() && recorded->second != *hash)
+      v.reasons.push_back(fmt::format("output {} was changed after it was written", output.string()));
+  }
+  for (const auto& output : job.optional_outputs) {
+    const auto recorded = record->outputs.find(state_.Name(output));
+    if (recorded == record->outputs.end()) continue;
+    const auto hash = state_.ContentHash(output);
+    if (!hash) v.reasons.push_back(fmt::format("output {} is missing", output.string()));
+    else if (recorded->second != *hash) v.reasons.push_back(fmt::format("output {} was changed after it was written", output.string()));
+  }
+  return v;
+}
+
+BakeResult Runner::Run() {
+  const auto start = Clock::now();
+  Impl impl(*this);
+  const std::size_t n = jobs_.size();
+  impl.status.assign(n, Status::kPending);
+  std::map<std::string, std::size_t> index_of;
+  for (std::size_t i = 0; i < n; ++i) index_of[jobs_[i].id] = i;
+
+  // --only STAGE: the selected jobs always run; every job upstream of them must be up to date.
+  std::vector<bool> selected(n, true);
+  if (options_.only) {
+    std::vector<std::string> problems;
+    for (std::size_t i = 0; i < n; ++i) {
+      selected[i] = jobs_[i].stage == *options_.only;
+      if (!selected[i]) continue;
+      impl.forced.insert(i);
+      for (const auto& input : jobs_[i].inputs)
+        if (!fs::exists(input)) problems.push_back(fmt::format("input {} of {} is missing", input.string(), jobs_[i].id));
+    }
+    for (std::size_t i = 0; i < n && problems.size() < 5; ++i) {
+      if (selected[i]) continue;
+      const Verdict v = Evaluate(jobs_[i]);
+      if (v.stale()) problems.push_back(fmt::format("{} is stale ({})", jobs_[i].id, fmt::join(v.reasons, "; ")));
+    }
+    if (!problems.empty() && !options_.force) {
+      BakeResult refused;
+      refused.exit_code = kExitOnlyRefused;
+      refused.failure = fmt::format(
+          "--only {} refused: {}{}; run `rime-bake {} {}` to bring its inputs up to date, or add --force to use them as they are",
+          StageName(*options_.only), problems.front(), problems.size() > 1 ? fmt::format(" (and {} more problems)", problems.size() - 1) : "",
+          layout_.scene_file.string(), StageName(*options_.only));
+      return refused;
+    }
+    for (std::size_t i = 0; i < n; ++i)
+      if (!selected[i]) impl.status[i] = Status::kDone;  // upstream counts as satisfied
+  } else if (options_.force) {
+    for (std::size_t i = 0; i < n; ++i) impl.forced.insert(i);
+  }
+
+  if (options_.dry_run) {
+    // Jobs downstream of a job that would run are listed too: they rerun unless early cutoff finds
+    // the upstream output byte-identical.
+    std::set<std::string> would_run;
+    for (std::size_t i = 0; i < n; ++i) {
+      if (!selected[i]) continue;
+      const Job& job = jobs_[i];
+      std::vector<std::string> reasons;
+      for (const auto& dep : job.dependencies)
+        if (would_run.count(dep)) {
+          reasons.push_back(fmt::format("after {} reruns (skipped then if its output comes out identical)", dep));
+          break;
+        }
+      if (reasons.empty()) {
+        reasons = Evaluate(job).reasons;
+        if (reasons.empty() && impl.forced.count(i)) reasons.push_back("requested (--only/--force)");
+      }
+      StageSummary& summary = impl.result.stages[static_cast<int>(job.stage)];
+      if (reasons.empty()) {
+        ++summary.cached;
+        if (options_.explain) std::printf("# %s: up to date\n", job.id.c_str());
+        continue;
+      }
+      would_run.insert(job.id);
+      ++summary.ran;
+      if (options_.explain) std::printf("# %s: %s\n", job.id.c_str(), fmt::format("{}", fmt::join(reasons, "; ")).c_str());
+      std::printf("%s\n", CommandLine(job.program, job.args).c_str());
+    }
+    std::fflush(stdout);
+    impl.result.seconds = std::chrono::duration<double>(Clock::now() - start).count();
+    return impl.result;
+  }
+
+  fs::create_directories(layout_.logs());
+  std::size_t total = 0;
+  std::array<std::int64_t, kStageCount> stage_total{};
+  for (std::size_t i = 0; i < n; ++i)
+    if (selected[i]) ++total, ++stage_total[static_cast<int>(jobs_[i].stage)];
+  Progress progress("jobs", static_cast<std::int64_t>(total));
+  std::vector<std::thread> threads(n);
+  int running = 0;
+  bool exclusive_running = false;
+  std::int64_t sim_frames_seen = 0;
+  const auto finished = [&](std::size_t i) { return impl.status[i] == Status::kDone || impl.status[i] == Status::kFailed || impl.status[i] == Status::kNotRun; };
+
+  std::unique_lock lock(impl.mutex);
+  while (true) {
+    if (Interrupted()) impl.stop = true;
+    for (std::size_t i = 0; i < n; ++i)
+      if (threads[i].joinable() && finished(i)) {
+        lock.unlock();
+        threads[i].join();
+        lock.lock();
+      }
+    bool waiting = false;
+    for (std::size_t i = 0; i < n && !impl.stop; ++i) {
+      if (impl.status[i] != Status::kPending) continue;
+      const Job& job = jobs_[i];
+      bool blocked = false, dependency_failed = false;
+      for (const auto& dep : job.dependencies) {
+        const auto it = index_of.find(dep);
+        if (it == index_of.end()) continue;
+        const Status s = impl.status[it->second];
+        if (s == Status::kFailed || s == Status::kNotRun) dependency_failed = true;
+        else if (s != Status::kDone) blocked = true;
+      }
+      if (dependency_failed) {
+        impl.status[i] = Status::kNotRun;
+        ++impl.result.stages[static_cast<int>(job.stage)].not_run;
+        continue;
+      }
+      if (blocked) {
+        waiting = true;
+        continue;
+      }
+      if (exclusive_running || (job.exclusive && running > 0) || running >= std::max(1, options_.parallel_frames)) {
+        waiting = true;
+        break;
+      }
+      impl.status[i] = Status::kRunning;
+      ++running;
+      exclusive_running = job.exclusive;
+      threads[i] = std::thread([&, i] {
+        Status s;
+        try {
+          s = impl.Execute(i);
+        } catch (const std::exception& e) {
+          impl.Fail(jobs_[i], static_cast<int>(ExitCode::kFailure), fmt::format("{}: {}", jobs_[i].id, e.what()));
+          s = Status::kFailed;
+        }
+        std::lock_guard done_lock(impl.mutex);
+        impl.status[i] = s;
+        if (s == Status::kFailed) ++impl.result.stages[static_cast<int>(jobs_[i].stage)].failed;
+        --running;
+        if (jobs_[i].exclusive) exclusive_running = false;
+        impl.wake.notify_all();
+      });
+    }
+    if (running == 0 && (impl.stop || !waiting)) break;
+
+    // Live display: jobs finished per stage, and the simulation's frames as they appear.
+    std::array<std::int64_t, kStageCount> stage_done{};
+    std::int64_t done = 0;
+    std::string sim_status;
+    for (std::size_t i = 0; i < n; ++i) {
+      if (!selected[i]) continue;
+      if (finished(i)) ++done, ++stage_done[static_cast<int>(jobs_[i].stage)];
+      if (impl.status[i] == Status::kRunning && jobs_[i].stage == Stage::kSim) {
+        const std::int64_t frames = static_cast<std::int64_t>(jobs_[i].outputs.size()) - 2;
+        while (sim_frames_seen < frames && fs::exists(io::FramePath(layout_.sim(), "particles", sim_frames_seen, "h5part"))) ++sim_frames_seen;
+        sim_status = fmt::format("sim frame {}/{}", std::max<std::int64_t>(0, sim_frames_seen - 1), frames - 1);
+      }
+    }
+    std::string status;
+    for (int s = 0; s < kStageCount; ++s) {
+      if (!stage_total[s]) continue;
+      if (!status.empty()) status += ", ";
+      status += s == static_cast<int>(Stage::kSim) && !sim_status.empty() ? sim_status
+                                                                            : fmt::format("{} {}/{}", StageName(Stage(s)), stage_done[s], stage_total[s]);
+    }
+    progress.Update(done, status);
+    impl.wake.wait_for(lock, std::chrono::milliseconds(200));
+  }
+  for (std::size_t i = 0; i < n; ++i)
+    if (impl.status[i] == Status::kPending) ++impl.result.stages[static_cast<int>(jobs_[i].stage)].not_run;
+  lock.unlock();
+  for (auto& t : threads)
+    if (t.joinable()) t.join();
+  progress.Finish();
+  if (impl.result.exit_code == 0 && Interrupted()) {
+    impl.result.exit_code = static_cast<int>(ExitCode::kInterrupted);
+    impl.result.failure = "interrupted; rerun the same command to continue";
+  }
+  impl.result.seconds = std::chrono::duration<double>(Clock::now() - start).count();
+  return impl.result;
+}
+
+std::string SummaryTable(const BakeResult& result, bool preview_skipped) {
+  std::string out = fmt::format("{:<10} {:>6} {:>7} {:>7} {:>8} {:>9}\n", "stage", "ran", "cached", "failed", "not run", "time");
+  StageSummary total;
+  for (int s = 0; s < kStageCount; ++s) {
+    const StageSummary& st = result.stages[s];
+    if (static_cast<Stage>(s) == Stage::kPreview && preview_skipped) {
+      out += fmt::format("{:<10} {:>42}\n", "preview", "skipped (no blender on PATH)");
+      continue;
+    }
+    if (st.ran + st.cached + st.failed + st.not_run == 0) continue;
+    out += fmt::format("{:<10} {:>6} {:>7} {:>7} {:>8} {:>9}\n", StageName(static_cast<Stage>(s)), st.ran, st.cached, st.failed, st.not_run,
+                       FormatDuration(st.seconds));
+    total.ran += st.ran, total.cached += st.cached, total.failed += st.failed, total.not_run += st.not_run;
+  }
+  out += fmt::format("{:<10} {:>6} {:>7} {:>7} {:>8} {:>9}\n", "total", total.ran, total.cached, total.failed, total.not_run,
+                     FormatDuration(result.seconds));
+  return out;
+}
+
+}  // namespace rime::bake

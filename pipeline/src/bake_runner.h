@@ -1,0 +1,68 @@
+/// @file bake_runner.h
+/// @brief Decides which jobs are stale and runs them: cheap checks first, content hashes when a
+/// file's size or mtime changed, incomplete markers for interrupted jobs, early cutoff when a
+/// rerun writes byte-identical output (the downstream keys hash input content, not timestamps).
+#pragma once
+
+#include <array>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "bake_graph.h"
+#include "bake_state.h"
+
+namespace rime::bake {
+
+/// rime-bake's own exit codes beyond the shared ones (README.md "rime-bake").
+constexpr int kExitStageFailed = 7;    // a stage tool failed: the message names stage, frame and log
+constexpr int kExitOnlyRefused = 8;    // --only: inputs missing or stale (pass --force to run anyway)
+
+struct RunOptions {
+  std::optional<Stage> only;  // --only STAGE: rerun that stage's jobs on cached inputs
+  bool force = false;         // rerun selected jobs even when up to date (--only: accept stale inputs)
+  bool dry_run = false;       // print the commands that would run
+  bool explain = false;       // print why each job is stale
+  int parallel_frames = 1;    // -j
+};
+
+struct StageSummary {
+  int ran = 0, cached = 0, failed = 0, not_run = 0;
+  double seconds = 0;  // wall time of the jobs that ran (summed over parallel jobs)
+};
+
+struct BakeResult {
+  std::array<StageSummary, kStageCount> stages{};
+  int exit_code = 0;
+  std::string failure;  // one line; empty on success
+  double seconds = 0;
+};
+
+/// Why a job would run; empty when it is up to date.
+struct Verdict {
+  std::vector<std::string> reasons;
+  JobRecord fresh;  // key and components computed from the current inputs
+  std::vector<std::string> missing_inputs;
+  bool stale() const { return !reasons.empty(); }
+};
+
+class Runner {
+ public:
+  Runner(const SceneDocument& doc, const BakeLayout& layout, std::vector<Job> jobs, RunOptions options);
+  BakeResult Run();
+  /// Staleness of one job against the recorded state (no side effects besides stamp updates).
+  Verdict Evaluate(const Job& job);
+
+ private:
+  struct Impl;
+  const SceneDocument& doc_;
+  BakeLayout layout_;
+  std::vector<Job> jobs_;
+  RunOptions options_;
+  BakeState state_;
+};
+
+/// The table printed at the end: stage, jobs run, cached, failed, time.
+std::string SummaryTable(const BakeResult& result, bool preview_skipped);
+
+}  // namespace rime::bake

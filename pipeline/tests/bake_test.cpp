@@ -1,0 +1,342 @@
+// rime-bake's decisions (what is stale, what runs, what it reports), tested by running the real
+// rime-bake binary on fake stage tools (fake_tools.h) that log every invocation.
+#include <gtest/gtest.h>
+#include <signal.h>
+#include <spawn.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <fmt/format.h>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <sstream>
+#include <thread>
+
+#include "fake_tools.h"
+#include "rime/core/error.h"
+#include "rime/io/scene.h"
+
+namespace fs = std::filesystem;
+extern char** environ;
+
+namespace rime::bake {
+namespace {
+
+constexpr int kLastFrame = 3;  // fps 2 x end_time 1.5 s: frames 0..3
+
+const char* kScene = R"([scene]
+fps = 2
+end_time = 1.5
+
+[water]
+spacing = 0.05
+
+[simulation]
+modules = ["gravity"]
+omega = 0.5
+
+[[solid]]
+name = "ground"
+shape = "plane"
+size = [1.0, 1.0, 1.0]
+
+[[water_block]]
+min = [0.0, 0.0, 0.1]
+max = [0.2, 0.2, 0.3]
+)";
+
+std::string ReadFile(const fs::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  std::stringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+void WriteFile(const fs::path& p, const std::string& text) { std::ofstream(p, std::ios::binary) << text; }
+
+class Bake : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
+    root_ = fs::temp_directory_path() / (std::string("rime_bake_test_") + info->name() + "_" + std::to_string(getpid()));
+    fs::remove_all(root_);
+    fs::create_directories(root_);
+    testing::WriteFakeTools(root_ / "tools");
+    scene_ = root_ / "scene.toml";
+    WriteFile(scene_, kScene);
+    setenv("FAKE_LOG", (root_ / "invocations.log").c_str(), 1);
+    setenv("FAKE_FRAMES", std::to_string(kLastFrame).c_str(), 1);
+    unsetenv("FAKE_FAIL");
+    unsetenv("FAKE_SIM_SLEEP");
+  }
+  void TearDown() override {
+    if (!HasFailure()) fs::remove_all(root_);
+  }
+
+  fs::path Out() const { return root_ / "out"; }
+  /// Runs rime-bake; returns its exit code, its stdout+stderr in `output_`.
+  int RunBake(const std::string& extra = "") {
+    fs::remove(root_ / "invocations.log");
+    std::string command = std::string("'") + RIME_BINARY_DIR "/bin/rime-bake' '" + scene_.string() + "' --tools '" +
+                          (root_ / "tools").string() + "' -o '" + Out().string() + "' " + extra + " > '" +
+                          (root_ / "bake_output.txt").string() + "' 2>&1";
+    const int status = std::system(command.c_str());
+    output_ = ReadFile(root_ / "bake_output.txt");
+    return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  }
+  /// Tool name -> number of invocations in the last run.
+  std::map<std::string, int> Invocations() const {
+    std::map<std::string, int> count;
+    std::ifstream in(root_ / "invocations.log");
+    std::string line;
+    while (std::getline(in, line)) ++count[line.substr(0, line.find(' '))];
+    return count;
+  }
+  std::vector<std::string> InvocationLines() const {
+    std::vector<std::string> lines;
+    std::ifstream in(root_ / "invocations.log");
+    std::string line;
+    while (std::getline(in, line)) lines.push_back(line);
+    return lines;
+  }
+  void EditScene(const std::string& from, const std::string& to) {
+    std::string text = ReadFile(scene_);
+    const auto at = text.find(from);
+    ASSERT_NE(at, std::string::npos) << from;
+    text.replace(at, from.size(), to);
+    WriteFile(scene_, text);
+  }
+  /// Moves a file's mtime forward without changing its content (like `touch`).
+  static void Touch(const fs::path& p) { fs::last_write_time(p, fs::last_write_time(p) + std::chrono::seconds(5)); }
+
+  fs::path root_, scene_;
+  std::string output_;
+};
+
+using Counts = std::map<std::string, int>;
+const Counts kEverything{{"rime-boundary", 1}, {"rime-sim", 1}, {"rime-surface", kLastFrame + 1}, {"rime-clean", kLastFrame + 1}};
+
+TEST_F(Bake, FirstRunBakesEverythingAndSecondRunExecutesNothing) {
+  ASSERT_EQ(RunBake(), 0) << output_;
+  EXPECT_EQ(Invocations(), kEverything);
+  for (int f = 0; f <= kLastFrame; ++f) {
+    EXPECT_TRUE(fs::exists(Out() / "cache/sim" / fmt::format("particles.{:04}.h5part", f)));
+    EXPECT_TRUE(fs::exists(Out() / "surface" / fmt::format("ice.{:04}.vdb", f)));
+    EXPECT_TRUE(fs::exists(Out() / "clean" / fmt::format("ice_clean.{:04}.json", f)));
+    EXPECT_TRUE(fs::exists(Out() / "cache/logs" / fmt::format("surface.{:04}.log", f)));
+  }
+  EXPECT_TRUE(fs::exists(Out() / "cache/.rime-bake/state.json"));
+  EXPECT_TRUE(fs::is_empty(Out() / "cache/.rime-bake/incomplete"));
+  EXPECT_NE(output_.find("cleanup"), std::string::npos) << "summary table expected:\n" << output_;
+
+  ASSERT_EQ(RunBake(), 0) << output_;
+  EXPECT_TRUE(Invocations().empty()) << output_;
+}
+
+TEST_F(Bake, TouchingFilesWithoutChangingThemRerunsNothing) {
+  ASSERT_EQ(RunBake(), 0) << output_;
+  Touch(scene_);
+  Touch(Out() / "cache/boundary/ground.h5part");
+  Touch(Out() / "cache/sim/particles.0002.h5part");
+  Touch(Out() / "surface/ice.0001.obj");
+  Touch(Out() / "clean/ice_clean.0003.obj");
+  Touch(root_ / "tools/rime-clean");
+  ASSERT_EQ(RunBake(), 0) << output_;
+  EXPECT_TRUE(Invocations().empty()) << output_;
+  // Reformatting the scene (comments, spacing) is not a change either: sections are hashed parsed.
+  EditScene("omega = 0.5", "omega   =   0.5   # relaxed Jacobi");
+  ASSERT_EQ(RunBake(), 0) << output_;
+  EXPECT_TRUE(Invocations().empty()) << output_;
+}
+
+// A [surface] key the scene loader accepts (the surface stage owns that table and its names).
+std::string AcceptedSurfaceKey() {
+  for (const char* key : {"voxel_size = 0.01", "voxel_ratio = 0.5", "iso_value = 0.5", "smoothing_iterations = 2", "k_r = 4.0",
+                          "resolution = 200", "mode = \"isotropic\"", "water = true"}) {
+    try {
+      io::ParseScene(std::string(kScene) + "\n[surface]\n" + key + "\n", "probe.toml");
+      return key;
+    } catch (const Error&) {
+    }
+  }
+  return {};
+}
+
+TEST_F(Bake, ChangingASurfaceParameterRerunsSurfaceAndCleanupOnly) {
+  const std::string key = AcceptedSurfaceKey();
+  if (key.empty()) GTEST_SKIP() << "the scene loader accepts no [surface] key yet (rime-surface's settings are not merged)";
+  ASSERT_EQ(RunBake(), 0) << output_;
+  WriteFile(scene_, ReadFile(scene_) + "\n[surface]\n" + key + "\n");
+  ASSERT_EQ(RunBake("--explain"), 0) << output_;
+  EXPECT_EQ(Invocations(), (Counts{{"rime-surface", kLastFrame + 1}, {"rime-clean", kLastFrame + 1}})) << output_;
+  EXPECT_NE(output_.find("scene section [surface]"), std::string::npos) << output_;
+}
+
+TEST_F(Bake, RerunWithIdenticalOutputCutsOffDownstream) {
+  ASSERT_EQ(RunBake(), 0) << output_;
+  // The simulation section changes (the fake sim ignores omega): the sim reruns, writes the same
+  // bytes, and nothing downstream reruns.
+  EditScene("omega = 0.5", "omega = 0.6");
+  ASSERT_EQ(RunBake("--explain"), 0) << output_;
+  EXPECT_EQ(Invocations(), (Counts{{"rime-sim", 1}})) << output_;
+  EXPECT_NE(output_.find("scene section [simulation] changed"), std::string::npos) << output_;
+  // An edited output reruns the job that wrote it; its restored content cuts cleanup off.
+  WriteFile(Out() / "surface/ice.0001.obj", "edited by hand\n");
+  ASSERT_EQ(RunBake(), 0) << output_;
+  EXPECT_EQ(Invocations(), (Counts{{"rime-surface", 1}})) << output_;
+}
+
+TEST_F(Bake, ChangingTheWaterSpacingRerunsEverything) {
+  ASSERT_EQ(RunBake(), 0) << output_;
+  EditScene("spacing = 0.05", "spacing = 0.04");
+  ASSERT_EQ(RunBake(), 0) << output_;
+  EXPECT_EQ(Invocations(), kEverything) << output_;
+}
+
+TEST_F(Bake, ChangingAToolRerunsItsStage) {
+  ASSERT_EQ(RunBake(), 0) << output_;
+  WriteFile(root_ / "tools/rime-clean", ReadFile(root_ / "tools/rime-clean") + "# new version\n");
+  ASSERT_EQ(RunBake(), 0) << output_;
+  EXPECT_EQ(Invocations(), (Counts{{"rime-clean", kLastFrame + 1}})) << output_;
+}
+
+TEST_F(Bake, OnlyCleanupRerunsCleanupAlone) {
+  ASSERT_EQ(RunBake(), 0) << output_;
+  ASSERT_EQ(RunBake("--only cleanup"), 0) << output_;
+  EXPECT_EQ(Invocations(), (Counts{{"rime-clean", kLastFrame + 1}})) << output_;
+  ASSERT_EQ(RunBake("--only cleanup --frames 1-2"), 0) << output_;
+  EXPECT_EQ(Invocations(), (Counts{{"rime-clean", 2}})) << output_;
+}
+
+TEST_F(Bake, OnlyRefusesMissingOrStaleInputsUnlessForced) {
+  EXPECT_EQ(RunBake("--only surface"), 8) << output_;
+  EXPECT_TRUE(Invocations().empty());
+  EXPECT_NE(output_.find("--only surface refused"), std::string::npos) << output_;
+  EXPECT_NE(output_.find("missing"), std::string::npos) << output_;
+
+  ASSERT_EQ(RunBake(), 0) << output_;
+  EditScene("spacing = 0.05", "spacing = 0.04");  // boundary and sim are now stale
+  EXPECT_EQ(RunBake("--only cleanup"), 8) << output_;
+  EXPECT_NE(output_.find("stale"), std::string::npos) << output_;
+  EXPECT_TRUE(Invocations().empty());
+  ASSERT_EQ(RunBake("--only cleanup --force"), 0) << output_;
+  EXPECT_EQ(Invocations(), (Counts{{"rime-clean", kLastFrame + 1}})) << output_;
+}
+
+TEST_F(Bake, IncompleteMarkerForcesARerun) {
+  ASSERT_EQ(RunBake(), 0) << output_;
+  WriteFile(Out() / "cache/.rime-bake/incomplete/cleanup.0002", "interrupted");
+  ASSERT_EQ(RunBake("--explain"), 0) << output_;
+  EXPECT_EQ(InvocationLines().size(), 1u) << output_;
+  EXPECT_EQ(Invocations(), (Counts{{"rime-clean", 1}})) << output_;
+  EXPECT_NE(output_.find("incomplete"), std::string::npos) << output_;
+  EXPECT_FALSE(fs::exists(Out() / "cache/.rime-bake/incomplete/cleanup.0002"));
+}
+
+TEST_F(Bake, FailingStageReportsStageFrameAndLog) {
+  setenv("FAKE_FAIL", "surface:2", 1);
+  EXPECT_EQ(RunBake(), 7) << output_;
+  EXPECT_NE(output_.find("stage surface failed on frame 2"), std::string::npos) << output_;
+  EXPECT_NE(output_.find("cache/logs/surface.0002.log"), std::string::npos) << output_;
+  EXPECT_NE(output_.find("no particles in frame (fake)"), std::string::npos) << "the tool's own error line:\n" << output_;
+  EXPECT_EQ(Invocations().count("rime-clean") ? Invocations().at("rime-clean") : 0, 2) << "frames 0 and 1 only:\n" << output_;
+  unsetenv("FAKE_FAIL");
+  ASSERT_EQ(RunBake(), 0) << output_;
+  EXPECT_EQ(Invocations(), (Counts{{"rime-surface", 2}, {"rime-clean", 2}})) << output_;
+}
+
+TEST_F(Bake, FailedSimulationResumesAndMatchesAnUninterruptedBake) {
+  setenv("FAKE_FAIL", "sim:2", 1);
+  EXPECT_EQ(RunBake(), 7) << output_;
+  EXPECT_NE(output_.find("stage sim failed"), std::string::npos) << output_;
+  EXPECT_NE(output_.find("sim.log"), std::string::npos) << output_;
+  unsetenv("FAKE_FAIL");
+  ASSERT_EQ(RunBake(), 0) << output_;
+  const auto lines = InvocationLines();
+  ASSERT_FALSE(lines.empty());
+  EXPECT_NE(lines.front().find("--resume"), std::string::npos) << lines.front();
+  const fs::path interrupted = Out();
+  fs::rename(interrupted, root_ / "first");
+  ASSERT_EQ(RunBake(), 0) << output_;
+  for (int f = 0; f <= kLastFrame; ++f) {
+    const std::string name = fmt::format("clean/ice_clean.{:04}.obj", f);
+    EXPECT_EQ(ReadFile(root_ / "first" / name), ReadFile(Out() / name)) << name;
+  }
+}
+
+TEST_F(Bake, ChangedParametersRestartTheSimulationInsteadOfResuming) {
+  setenv("FAKE_FAIL", "sim:2", 1);
+  EXPECT_EQ(RunBake(), 7) << output_;
+  unsetenv("FAKE_FAIL");
+  EditScene("omega = 0.5", "omega = 0.7");
+  ASSERT_EQ(RunBake(), 0) << output_;
+  const auto lines = InvocationLines();
+  ASSERT_FALSE(lines.empty());
+  EXPECT_EQ(lines.front().find("--resume"), std::string::npos) << lines.front();
+}
+
+TEST_F(Bake, KilledDuringSimulationResumes) {
+  setenv("FAKE_SIM_SLEEP", "0.4", 1);
+  fs::create_directories(root_);
+  const std::string bake = RIME_BINARY_DIR "/bin/rime-bake";
+  std::vector<std::string> args = {bake, scene_.string(), "--tools", (root_ / "tools").string(), "-o", Out().string(), "-q"};
+  std::vector<char*> argv;
+  for (auto& a : args) argv.push_back(a.data());
+  argv.push_back(nullptr);
+  pid_t pid = 0;
+  ASSERT_EQ(posix_spawn(&pid, bake.c_str(), nullptr, nullptr, argv.data(), environ), 0);
+  const fs::path second_frame = Out() / "cache/sim/particles.0001.h5part";
+  for (int k = 0; k < 200 && !fs::exists(second_frame); ++k) std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  ASSERT_TRUE(fs::exists(second_frame));
+  kill(pid, SIGKILL);  // no chance to clean up; the fake sim dies with it (PR_SET_PDEATHSIG)
+  int status = 0;
+  waitpid(pid, &status, 0);
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  EXPECT_FALSE(fs::exists(Out() / "cache/sim/particles.0003.h5part"));
+  EXPECT_TRUE(fs::exists(Out() / "cache/.rime-bake/incomplete/sim"));
+
+  ASSERT_EQ(RunBake("--explain"), 0) << output_;
+  const auto lines = InvocationLines();
+  ASSERT_FALSE(lines.empty());
+  EXPECT_EQ(lines.front().rfind("rime-sim", 0), 0u) << lines.front();
+  EXPECT_NE(lines.front().find("--resume"), std::string::npos) << lines.front();
+  EXPECT_EQ(Invocations().count("rime-boundary"), 0u);
+  for (int f = 0; f <= kLastFrame; ++f)
+    EXPECT_EQ(ReadFile(Out() / fmt::format("cache/sim/particles.{:04}.h5part", f)).rfind(fmt::format("frame {}\n", f), 0), 0u);
+}
+
+TEST_F(Bake, DryRunPrintsCommandsAndRunsNothing) {
+  ASSERT_EQ(RunBake("--dry-run"), 0) << output_;
+  EXPECT_TRUE(Invocations().empty());
+  EXPECT_NE(output_.find("rime-sim"), std::string::npos) << output_;
+  EXPECT_NE(output_.find("particles.0003.h5part"), std::string::npos) << output_;
+  EXPECT_FALSE(fs::exists(Out() / "surface"));
+  ASSERT_EQ(RunBake(), 0) << output_;
+  EditScene("omega = 0.5", "omega = 0.6");
+  ASSERT_EQ(RunBake("--dry-run --explain"), 0) << output_;
+  EXPECT_TRUE(Invocations().empty());
+  EXPECT_NE(output_.find("# sim: scene section [simulation] changed"), std::string::npos) << output_;
+  EXPECT_NE(output_.find("# surface.0000: after sim reruns"), std::string::npos) << output_;
+}
+
+TEST_F(Bake, TargetStopsAtItsStageAndCleanRemovesEverything) {
+  ASSERT_EQ(RunBake("sim"), 0) << output_;
+  EXPECT_EQ(Invocations(), (Counts{{"rime-boundary", 1}, {"rime-sim", 1}})) << output_;
+  EXPECT_FALSE(fs::exists(Out() / "surface"));
+  ASSERT_EQ(RunBake("--clean"), 0) << output_;
+  EXPECT_FALSE(fs::exists(Out()));
+  EXPECT_EQ(RunBake("nonsense"), 2) << output_;
+}
+
+TEST_F(Bake, BadBakeTableNamesFileLineAndField) {
+  const std::string text = ReadFile(scene_) + "[bake]\npreview_widht = 640\n";
+  WriteFile(scene_, text);
+  const auto line = std::count(text.begin(), text.end(), '\n');  // the misspelled key is on the last line
+  EXPECT_EQ(RunBake(), 3) << output_;
+  EXPECT_NE(output_.find(fmt::format("scene.toml:{}: bake.preview_widht", line)), std::string::npos) << output_;
+}
+
+}  // namespace
+}  // namespace rime::bake

@@ -1,0 +1,79 @@
+/// @file fake_tools.h
+/// @brief Tiny shell-script stand-ins for the stage tools, following their command-line contracts
+/// (README.md), so rime-bake's decisions can be tested without the real stages. Each appends its
+/// command line to $FAKE_LOG; outputs are copies of the inputs plus the scene section the real tool
+/// would read, written atomically (temporary name + mv).
+#pragma once
+
+#include <sys/stat.h>
+
+#include <filesystem>
+#include <fstream>
+#include <string>
+
+namespace rime::bake::testing {
+
+// FAKE_FAIL=<stage>:<frame> makes that stage fail on that frame; FAKE_SIM_SLEEP slows each frame.
+constexpr const char* kPreamble = R"SH(#!/bin/bash
+set -e
+echo "$(basename "$0") $*" >> "$FAKE_LOG"
+section() { sed -n "/^\[$1\]/,/^\[/p" "$2" | grep -v '^\[' || true; }
+fail_here() { [ "${FAKE_FAIL:-}" = "$1:$2" ]; }
+)SH";
+
+constexpr const char* kBoundary = R"SH(
+scene=$1; out=$3
+mkdir -p "$out"
+for name in $(grep -E '^name *= *"' "$scene" | sed -E 's/.*"(.*)"/\1/'); do
+  { echo "boundary $name"; section water "$scene"; } > "$out/$name.h5part.tmp"; mv "$out/$name.h5part.tmp" "$out/$name.h5part"
+done
+)SH";
+
+constexpr const char* kSim = R"SH(
+scene=$1; boundary=$3; out=$5; first=0
+mkdir -p "$out"
+if [[ " $* " == *" --resume "* ]]; then
+  while [ -f "$out/particles.$(printf %04d $first).h5part" ]; do first=$((first + 1)); done
+fi
+for f in $(seq $first "$FAKE_FRAMES"); do
+  if fail_here sim $f; then echo "rime-sim: error: simulation diverged at frame $f (fake)" >&2; exit 4; fi
+  sleep "${FAKE_SIM_SLEEP:-0}"
+  name="$out/particles.$(printf %04d $f).h5part"
+  { echo "frame $f"; cat "$boundary"/*.h5part; } > "$name.tmp"; mv "$name.tmp" "$name"
+done
+echo index > "$out/particles.h5part.tmp"; mv "$out/particles.h5part.tmp" "$out/particles.h5part"
+echo '{}' > "$out/stats.jsonl.tmp"; mv "$out/stats.jsonl.tmp" "$out/stats.jsonl"
+)SH";
+
+constexpr const char* kSurface = R"SH(
+input=$1; out=$3; scene=$5
+frame=$(basename "$input" | sed -E 's/particles\.([0-9]+)\.h5part/\1/')
+if fail_here surface $((10#$frame)); then echo "rime-surface: error: no particles in frame (fake) ($input)" >&2; exit 3; fi
+mkdir -p "$out"
+for ext in vdb obj ply; do
+  { cat "$input"; section surface "$scene"; echo "$ext"; } > "$out/ice.$frame.$ext.tmp"; mv "$out/ice.$frame.$ext.tmp" "$out/ice.$frame.$ext"
+done
+)SH";
+
+constexpr const char* kClean = R"SH(
+input=$1; out=$3; scene=$5
+frame=$(basename "$input" | sed -E 's/ice\.([0-9]+)\.obj/\1/')
+if fail_here cleanup $((10#$frame)); then echo "rime-clean: error: mesh has no faces (fake) ($input)" >&2; exit 3; fi
+mkdir -p "$out"
+for ext in obj ply json; do
+  { cat "$input"; section cleanup "$scene"; echo "$ext"; } > "$out/ice_clean.$frame.$ext.tmp"; mv "$out/ice_clean.$frame.$ext.tmp" "$out/ice_clean.$frame.$ext"
+done
+)SH";
+
+inline void WriteFakeTools(const std::filesystem::path& folder) {
+  std::filesystem::create_directories(folder);
+  const std::pair<const char*, const char*> tools[] = {
+      {"rime-boundary", kBoundary}, {"rime-sim", kSim}, {"rime-surface", kSurface}, {"rime-clean", kClean}};
+  for (const auto& [name, body] : tools) {
+    const auto path = folder / name;
+    std::ofstream(path) << kPreamble << body;
+    chmod(path.c_str(), 0755);
+  }
+}
+
+}  // namespace rime::bake::testing
