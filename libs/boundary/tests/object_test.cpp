@@ -1,1 +1,185 @@
+// Whole objects: mesh files through assimp, procedural solids, the boundary file, bad input files,
+// and the shared test meshes (bunny, teapot, armadillo).
 #include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+
+#include "rime/boundary/object.h"
+#include "rime/boundary/shapes.h"
+#include "rime/core/error.h"
+#include "rime/io/mesh.h"
+#include "test_helpers.h"
+
+namespace rime::boundary {
+namespace {
+
+namespace fs = std::filesystem;
+
+fs::path TempDir(const std::string& name) {
+  const fs::path dir = fs::temp_directory_path() / ("rime_boundary_test_" + name + "_" + std::to_string(::getpid()));
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  return dir;
+}
+
+void WriteText(const fs::path& path, const std::string& text) { std::ofstream(path, std::ios::binary) << text; }
+
+io::SolidObject MeshObject(const fs::path& file) {
+  io::SolidObject o;
+  o.name = "thing";
+  o.shape = "mesh";
+  o.mesh = file;
+  return o;
+}
+
+TEST(BoundaryObject, ProceduralBoxWritesAReadableBoundaryFile) {
+  io::SolidObject box;
+  box.name = "tank";
+  box.shape = "box";
+  box.container = true;
+  box.size = Vec3d(0.4, 0.3, 0.2);
+  box.transform.translate = Vec3d(0, 0, 0.1);
+  BoundarySettings settings;
+  settings.particle_spacing = 0.02;
+  const BoundaryObject object = BuildBoundaryObject(box, 3, {}, settings);
+  ASSERT_GT(object.size(), 0u);
+  EXPECT_DOUBLE_EQ(object.boundary_spacing, 0.01);
+  EXPECT_NEAR(object.bounds_min.z, 0.0f, 1e-6f);
+  EXPECT_NEAR(object.bounds_max.z, 0.2f, 1e-6f);
+  EXPECT_GT(object.mean_spacing, 0.5 * 0.01);
+  EXPECT_LE(object.mean_spacing, 0.01 * 1.0001);
+
+  const fs::path dir = TempDir("box");
+  const fs::path file = dir / "tank.h5part";
+  WriteBoundaryFile(file, object, "abc");
+  const io::ParticleFrame frame = io::ReadParticleFrame(file, "boundary");
+  ASSERT_EQ(frame.size(), object.size());
+  EXPECT_DOUBLE_EQ(frame.spacing, 0.02);
+  EXPECT_DOUBLE_EQ(frame.particle_radius, 0.01);
+  EXPECT_DOUBLE_EQ(frame.numbers.at("boundary_spacing"), 0.01);
+  EXPECT_DOUBLE_EQ(frame.numbers.at("smoothing_length"), 0.02);
+  EXPECT_EQ(frame.texts.at("object_name"), "tank");
+  EXPECT_EQ(frame.texts.at("shape"), "box");
+  EXPECT_EQ(frame.texts.at("mesh_hash").size(), 16u);
+  EXPECT_NE(frame.texts.at("transform").find("translate (0, 0, 0.1)"), std::string::npos);
+  const auto& volume = frame.Get<float>("volume");
+  const auto& phase = frame.Get<std::uint8_t>("phase");
+  const auto& ids = frame.Get<std::uint32_t>("object_id");
+  for (std::size_t i = 0; i < frame.size(); ++i) {
+    ASSERT_GT(volume[i], 0.0f);
+    ASSERT_LT(volume[i], 0.02f * 0.02f * 0.02f * 1.5f);  // far below pi h^3 for a particle with neighbours
+    ASSERT_EQ(phase[i], 1);
+    ASSERT_EQ(ids[i], 3u);
+  }
+  const auto normals = frame.GetVec3<float>("normal");
+  EXPECT_NEAR(Norm(normals[7]), 1.0f, 1e-5f);
+  EXPECT_EQ(frame.Get<std::int64_t>("id").back(), std::int64_t(frame.size() - 1));
+  fs::remove_all(dir);
+}
+
+TEST(BoundaryObject, MeshFileFormatsThroughAssimp) {
+  const fs::path dir = TempDir("formats");
+  // One cube written as OBJ (quads), ASCII STL (triangle soup) and PLY; all give the same particles.
+  WriteText(dir / "cube.obj",
+            "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nv 0 0 1\nv 1 0 1\nv 0 1 1\nv 1 1 1\n"
+            "f 1 3 4 2\nf 5 6 8 7\nf 1 2 6 5\nf 3 7 8 4\nf 1 5 7 3\nf 2 4 8 6\n");
+  io::WriteMesh(dir / "cube.ply", test_support::UnitCube());
+  std::string stl = "solid cube\n";
+  const io::TriMesh cube = test_support::UnitCube();
+  for (const auto& t : cube.triangles) {
+    stl += " facet normal 0 0 0\n  outer loop\n";
+    for (int k = 0; k < 3; ++k) {
+      const Vec3f& p = cube.positions[t[k]];
+      stl += "   vertex " + std::to_string(p.x) + " " + std::to_string(p.y) + " " + std::to_string(p.z) + "\n";
+    }
+    stl += "  endloop\n endfacet\n";
+  }
+  WriteText(dir / "cube.stl", stl + "endsolid cube\n");
+  BoundarySettings settings;
+  settings.particle_spacing = 0.2;  // d_b = 0.1
+  std::size_t expected = 0;
+  for (const char* name : {"cube.obj", "cube.ply", "cube.stl"}) {
+    SCOPED_TRACE(name);
+    const BoundaryObject o = BuildBoundaryObject(MeshObject(dir / name), 0, dir / name, settings);
+    EXPECT_EQ(o.stats.triangles, 12u);
+    EXPECT_EQ(o.stats.vertex_samples, 8u);
+    if (expected == 0) expected = o.size();
+    EXPECT_EQ(o.size(), expected);
+    EXPECT_EQ(o.mesh_hash.size(), 16u);
+  }
+  fs::remove_all(dir);
+}
+
+void ExpectBadFile(const fs::path& file, const std::string& fragment, double spacing = 0.02, std::uint64_t max_particles = 50'000'000) {
+  BoundarySettings settings;
+  settings.particle_spacing = spacing;
+  settings.max_particles = max_particles;
+  try {
+    BuildBoundaryObject(MeshObject(file), 0, file, settings);
+    ADD_FAILURE() << "expected an error for " << file;
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), ExitCode::kBadInput) << e.what();
+    EXPECT_NE(std::string(e.what()).find(fragment), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find(file.filename().string()), std::string::npos) << e.what();
+  }
+}
+
+TEST(BoundaryObject, BadInputFiles) {
+  const fs::path dir = TempDir("bad");
+  const std::string cube = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n";
+  WriteText(dir / "good.obj", cube);
+  ExpectBadFile(dir / "missing.obj", "not found");
+  WriteText(dir / "points.xyz", "1 2 3\n");
+  ExpectBadFile(dir / "points.xyz", "unsupported mesh format");
+  WriteText(dir / "garbage.ply", "this is not a ply file\n\x01\x02\x03");
+  ExpectBadFile(dir / "garbage.ply", "cannot read");
+  WriteText(dir / "vertices.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\n");
+  ExpectBadFile(dir / "vertices.obj", "");
+  WriteText(dir / "nan.obj", "v 0 0 0\nv nan 0 0\nv 0 1 0\nf 1 2 3\n");
+  ExpectBadFile(dir / "nan.obj", "");
+  WriteText(dir / "inf.obj", "v 0 0 0\nv 1 0 0\nv 0 inf 0\nf 1 2 3\n");
+  ExpectBadFile(dir / "inf.obj", "");
+  ExpectBadFile(dir / "good.obj", "spacing", 0);
+  ExpectBadFile(dir / "good.obj", "spacing", -0.1);
+  ExpectBadFile(dir / "good.obj", "more than the maximum", 1e-5);
+  ExpectBadFile(dir / "good.obj", "more than the maximum", 0.02, 1000);
+  fs::remove_all(dir);
+}
+
+// The shared test meshes sample without error at spacings tied to their size; the counts go to
+// the test log.
+TEST(BoundaryObject, SharedMeshes) {
+  const fs::path meshes = fs::path(RIME_SHARED_DIR) / "meshes";
+  if (!fs::exists(meshes)) GTEST_SKIP() << "shared test meshes not found at " << meshes << " (../shared/meshes beside the project)";
+  struct Case {
+    const char* file;
+    double size;  // about the largest extent, m
+  };
+  for (const Case c : {Case{"stanford-bunny.obj", 0.16}, Case{"teapot.obj", 6.4}, Case{"armadillo-lowres.obj", 1.0}}) {
+    SCOPED_TRACE(c.file);
+    const fs::path file = meshes / c.file;
+    if (!fs::exists(file)) GTEST_SKIP() << file << " is missing";
+    io::SolidObject object = MeshObject(file);
+    object.transform.up_axis = "y";
+    BoundarySettings settings;
+    settings.particle_spacing = c.size / 100;  // about 200 boundary particles across the object
+    const BoundaryObject o = BuildBoundaryObject(object, 0, file, settings);
+    ASSERT_GT(o.size(), 1000u);
+    const double db = o.boundary_spacing;
+    const auto nearest = NearestNeighborDistances(o.positions, float(3 * db));
+    float min_nn = INFINITY;
+    for (float r : nearest) min_nn = std::min(min_nn, r);
+    EXPECT_GE(min_nn, 0.5 * db * (1 - 1e-5));
+    for (float v : o.volumes) ASSERT_TRUE(std::isfinite(v) && v > 0);
+    std::printf("%s: %zu triangles (%zu degenerate skipped), %zu vertex + %zu edge + %zu face samples, %zu near-duplicates "
+                "removed -> %zu particles at d_b = %.4g m, mean spacing %.3f d_b\n",
+                c.file, o.stats.triangles, o.stats.degenerate_skipped, o.stats.vertex_samples, o.stats.edge_samples,
+                o.stats.face_samples, o.stats.near_duplicates_removed, o.size(), db, o.mean_spacing / db);
+    RecordProperty(std::string(c.file) + "_particles", std::to_string(o.size()));
+  }
+}
+
+}  // namespace
+}  // namespace rime::boundary
