@@ -53,15 +53,23 @@ struct GridView {
 
   RIME_HDI std::int64_t CellCoord(T x, T o) const { return static_cast<std::int64_t>(std::floor((x - o) * inv_cell)); }
 
-  /// Calls f(j, r_ij = x - points[j], r2) for every point j with |x - points[j]| < radius.
-  template <class F>
-  RIME_HDI void ForEachNeighbor(const Vec3<T>& x, T radius, F&& f) const {
+  /// Calls visit(begin, end) for the sorted-slot range of every occupied cell that can hold a
+  /// point within `radius` of x (cells whose box is farther than the radius are skipped).
+  template <class V>
+  RIME_HDI void ForEachCandidateCell(const Vec3<T>& x, T radius, V&& visit) const {
     if (count == 0) return;
-    const T r2max = radius * radius;
+    const T cell = T(1) / inv_cell, r2max = radius * radius;
     const std::int64_t cx = CellCoord(x.x, origin.x), cy = CellCoord(x.y, origin.y), cz = CellCoord(x.z, origin.z);
-    for (std::int64_t dz = -1; dz <= 1; ++dz)
-      for (std::int64_t dy = -1; dy <= 1; ++dy)
+    // Distance from x to the lower/upper faces of its own cell, per axis.
+    const Vec3<T> lo_gap{x.x - (origin.x + T(cx) * cell), x.y - (origin.y + T(cy) * cell), x.z - (origin.z + T(cz) * cell)};
+    const Vec3<T> hi_gap{cell - lo_gap.x, cell - lo_gap.y, cell - lo_gap.z};
+    for (std::int64_t dz = -1; dz <= 1; ++dz) {
+      const T gz = dz < 0 ? lo_gap.z : (dz > 0 ? hi_gap.z : T(0));
+      for (std::int64_t dy = -1; dy <= 1; ++dy) {
+        const T gy = dy < 0 ? lo_gap.y : (dy > 0 ? hi_gap.y : T(0));
         for (std::int64_t dx = -1; dx <= 1; ++dx) {
+          const T gx = dx < 0 ? lo_gap.x : (dx > 0 ? hi_gap.x : T(0));
+          if (gx * gx + gy * gy + gz * gz >= r2max) continue;  // the whole cell is out of range
           const std::int64_t ix = cx + dx, iy = cy + dy, iz = cz + dz;
           if (ix < 0 || iy < 0 || iz < 0 || ix > kMaxCellsPerAxis || iy > kMaxCellsPerAxis || iz > kMaxCellsPerAxis) continue;
           const std::uint64_t key = MortonKey(ix, iy, iz);
@@ -70,18 +78,43 @@ struct GridView {
             const std::uint64_t k = table_keys[slot];
             if (k == kEmptySlot) break;
             if (k == key) {
-              const std::uint32_t cell = table_cells[slot];
-              for (std::uint32_t s = cell_start[cell], e = cell_start[cell + 1]; s < e; ++s) {
-                const std::uint32_t j = sorted_index[s];
-                const Vec3<T> r = x - points[j];
-                const T r2 = Dot(r, r);
-                if (r2 < r2max) f(j, r, r2);
-              }
+              const std::uint32_t c = table_cells[slot];
+              visit(cell_start[c], cell_start[c + 1]);
               break;
             }
             slot = (slot + 1) & table_mask;
           }
         }
+      }
+    }
+  }
+
+  /// Calls f(j, r_ij = x - points[j], r2) for every point j with |x - points[j]| < radius.
+  template <class F>
+  RIME_HDI void ForEachNeighbor(const Vec3<T>& x, T radius, F&& f) const {
+    const T r2max = radius * radius;
+    ForEachCandidateCell(x, radius, [&](std::uint32_t begin, std::uint32_t end) {
+      for (std::uint32_t s = begin; s < end; ++s) {
+        const std::uint32_t j = sorted_index[s];
+        const Vec3<T> r = x - points[j];
+        const T r2 = Dot(r, r);
+        if (r2 < r2max) f(j, r, r2);
+      }
+    });
+  }
+
+  /// Number of points within radius of x (branch-free inner loop), optionally excluding `self`.
+  RIME_HDI std::uint32_t CountWithin(const Vec3<T>& x, T radius, std::uint32_t self) const {
+    const T r2max = radius * radius;
+    std::uint32_t c = 0;
+    ForEachCandidateCell(x, radius, [&](std::uint32_t begin, std::uint32_t end) {
+      for (std::uint32_t s = begin; s < end; ++s) {
+        const std::uint32_t j = sorted_index[s];
+        const Vec3<T> r = x - points[j];
+        c += (Dot(r, r) < r2max) & (j != self);
+      }
+    });
+    return c;
   }
 };
 
@@ -142,13 +175,12 @@ struct CountNeighbors {
   bool exclude_self;
   std::uint32_t* counts;
   RIME_HD void operator()(Index i) const {
-    std::uint32_t c = 0;
-    grid.ForEachNeighbor(queries[i], radius, [&](std::uint32_t j, const Vec3<T>&, T) { c += (!exclude_self || j != i); });
-    counts[i] = c;
+    counts[i] = grid.CountWithin(queries[i], radius, exclude_self ? static_cast<std::uint32_t>(i) : ~0u);
   }
 };
 
-/// Writes the neighbor indices of queries[i] at offsets[i].
+/// Writes the neighbor indices of queries[i] at offsets[i] (in cell order, then sorted order, so
+/// lists are deterministic).
 template <class T>
 struct FillNeighbors {
   GridView<T> grid;
@@ -159,8 +191,18 @@ struct FillNeighbors {
   std::uint32_t* indices;
   RIME_HD void operator()(Index i) const {
     std::uint32_t k = offsets[i];
-    grid.ForEachNeighbor(queries[i], radius, [&](std::uint32_t j, const Vec3<T>&, T) {
-      if (!exclude_self || j != i) indices[k++] = j;
+    const std::uint32_t end = offsets[i + 1];
+    const std::uint32_t self = exclude_self ? static_cast<std::uint32_t>(i) : ~0u;
+    const Vec3<T> x = queries[i];
+    const T r2max = radius * radius;
+    grid.ForEachCandidateCell(x, radius, [&](std::uint32_t begin, std::uint32_t stop) {
+      for (std::uint32_t s = begin; s < stop; ++s) {
+        const std::uint32_t j = grid.sorted_index[s];
+        const Vec3<T> r = x - grid.points[j];
+        // Branch-free: always store, advance only for a neighbor (the guard is almost always true).
+        if (k < end) indices[k] = j;
+        k += (Dot(r, r) < r2max) & (j != self);
+      }
     });
   }
 };
