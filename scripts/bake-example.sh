@@ -1,13 +1,17 @@
 #!/usr/bin/env bash
 # The main job (README.md): installs what is missing, builds the release preset and bakes the
-# built-in example scene end to end into out/default/.
+# built-in example scene end to end into out/default/ (rime-bake reruns only what is stale, so
+# running it again is quick).
+#   scripts/bake-example.sh [SCENE.toml [rime-bake flags...]]
 set -euo pipefail
 cd "$(dirname "$0")/.."
 scripts/setup.sh release
 SCENE="${1:-examples/default.toml}"
+shift || true
 BIN=build/release/bin
-if [ -x "$BIN/rime-bake" ]; then
-  exec "$BIN/rime-bake" "$SCENE" --output out/default
+if [ ! -x "$BIN/rime-bake" ]; then
+  echo "bake-example: $BIN/rime-bake was not built" >&2
+  exit 1
 fi
-echo "bake-example: rime-bake is not built yet; nothing to bake" >&2
-exit 1
+# Output folder: out/<scene name> (examples/default.toml -> out/default).
+exec "$BIN/rime-bake" "$SCENE" "$@"
