@@ -43,7 +43,8 @@ int Main(CLI::App& app, int argc, char** argv, const CommonOptions& options, con
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
-    return app.exit(e);
+    // --help and --version exit 0; every command-line error gets the documented code 2.
+    return app.exit(e) == 0 ? 0 : static_cast<int>(ExitCode::kUsage);
   }
   try {
     Apply(options);

@@ -29,9 +29,18 @@ std::vector<TriMesh> ReadParts(const std::filesystem::path& path, ImportStats* s
   // Points and lines are dropped; polygons become triangles; the node hierarchy is baked in.
   importer.SetPropertyInteger(AI_CONFIG_PP_SBP_REMOVE, aiPrimitiveType_POINT | aiPrimitiveType_LINE);
   const aiScene* scene = importer.ReadFile(path.string(), aiProcess_Triangulate | aiProcess_JoinIdenticalVertices |
-                                                              aiProcess_SortByPType | aiProcess_PreTransformVertices |
-                                                              aiProcess_ValidateDataStructure);
-  if (scene == nullptr) throw InputError(fmt::format("cannot read the mesh: {}", importer.GetErrorString()), where);
+                                                              aiProcess_SortByPType | aiProcess_PreTransformVertices);
+  if (scene == nullptr) {
+    // Post-processing refuses files without faces; read again without it to tell "no triangles"
+    // apart from a file assimp cannot parse.
+    const std::string reason = importer.GetErrorString();
+    Assimp::Importer plain;
+    const aiScene* raw = plain.ReadFile(path.string(), 0);
+    bool has_faces = false;
+    for (unsigned m = 0; raw != nullptr && m < raw->mNumMeshes; ++m) has_faces = has_faces || raw->mMeshes[m]->mNumFaces > 0;
+    if (raw != nullptr && !has_faces) throw InputError("the file has no triangles", where);
+    throw InputError(fmt::format("cannot read the mesh: {}", reason), where);
+  }
 
   std::vector<TriMesh> parts;
   ImportStats local;

@@ -1,0 +1,125 @@
+// rime-boundary as a user runs it: outputs, exit codes, one-line errors and no output on bad input.
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+#include "rime/io/particles.h"
+
+namespace {
+
+namespace fs = std::filesystem;
+
+const fs::path kTool = fs::path(RIME_BINARY_DIR) / "bin" / "rime-boundary";
+
+struct Result {
+  int code;
+  std::string err;
+};
+
+class RimeBoundaryTool : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() / ("rime_boundary_tool_" + std::to_string(::getpid()));
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+    Write("tetra.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n");
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+  void Write(const std::string& name, const std::string& text) { std::ofstream(dir_ / name, std::ios::binary) << text; }
+  Result Run(const std::string& args) {
+    const fs::path err = dir_ / "stderr.txt";
+    const std::string command = kTool.string() + " " + args + " -q 2> " + err.string() + " > /dev/null";
+    const int status = std::system(command.c_str());
+    std::ifstream in(err);
+    std::stringstream text;
+    text << in.rdbuf();
+    return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, text.str()};
+  }
+  // Exit code 3, one error line naming `names`, and no output file.
+  void ExpectBadInput(const std::string& args, const std::string& names, const fs::path& output) {
+    SCOPED_TRACE(args);
+    const Result r = Run(args);
+    EXPECT_EQ(r.code, 3) << r.err;
+    EXPECT_NE(r.err.find("rime-boundary: error: "), std::string::npos) << r.err;
+    EXPECT_NE(r.err.find(names), std::string::npos) << r.err;
+    EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
+    EXPECT_FALSE(fs::exists(output)) << output;
+    for (const auto& entry : fs::directory_iterator(dir_))
+      EXPECT_EQ(entry.path().string().find(".tmp."), std::string::npos) << "temporary file left: " << entry.path();
+  }
+  fs::path dir_;
+};
+
+TEST_F(RimeBoundaryTool, MeshToFileWithTransformAndSummary) {
+  const fs::path out = dir_ / "tetra.h5part", summary = dir_ / "summary.json";
+  const Result r = Run((dir_ / "tetra.obj").string() + " -o " + out.string() +
+                       " --spacing 0.1 --scale 2 --rotate 0,0,90 --translate 0,0,1 --json-summary " + summary.string());
+  ASSERT_EQ(r.code, 0) << r.err;
+  const rime::io::ParticleFrame frame = rime::io::ReadParticleFrame(out, "boundary");
+  EXPECT_GT(frame.size(), 100u);
+  EXPECT_DOUBLE_EQ(frame.numbers.at("boundary_spacing"), 0.05);
+  EXPECT_EQ(frame.texts.at("object_name"), "tetra");
+  float min_z = 1e9f, max_x = -1e9f;
+  for (const auto& p : frame.GetPositions<float>()) min_z = std::min(min_z, p.z), max_x = std::max(max_x, p.x);
+  EXPECT_NEAR(min_z, 1.0f, 1e-6f);  // translated up by 1
+  EXPECT_NEAR(max_x, 0.0f, 1e-6f);  // (2,0,0) rotated 90 deg about z -> (0,2,0)
+  std::ifstream in(summary);
+  std::stringstream text;
+  text << in.rdbuf();
+  EXPECT_NE(text.str().find("\"triangles_read\": 4"), std::string::npos) << text.str();
+}
+
+TEST_F(RimeBoundaryTool, SceneToFolder) {
+  Write("scene.toml",
+        "[water]\nspacing = 0.05\n\n"
+        "[[solid]]\nname = \"tank\"\nshape = \"box\"\ncontainer = true\nsize = [1.0, 0.5, 0.4]\n\n"
+        "[[solid]]\nname = \"prop\"\nshape = \"mesh\"\nmesh = \"tetra.obj\"\nscale = 0.3\ntranslate = [0, 0, 0.1]\n\n"
+        "[[solid]]\nname = \"ring\"\nshape = \"torus\"\nradius = 0.2\nminor_radius = 0.05\n");
+  const fs::path out = dir_ / "boundary";
+  const Result r = Run((dir_ / "scene.toml").string() + " -o " + out.string());
+  ASSERT_EQ(r.code, 0) << r.err;
+  std::uint32_t id = 0;
+  for (const char* name : {"tank", "prop", "ring"}) {
+    const rime::io::ParticleFrame f = rime::io::ReadParticleFrame(out / (std::string(name) + ".h5part"), "boundary");
+    EXPECT_GT(f.size(), 10u) << name;
+    EXPECT_DOUBLE_EQ(f.spacing, 0.05);
+    EXPECT_EQ(f.Get<std::uint32_t>("object_id").front(), id++);
+    EXPECT_FALSE(f.scene_hash.empty());
+  }
+}
+
+TEST_F(RimeBoundaryTool, BadInputExitsWithCode3AndNoOutput) {
+  const fs::path out = dir_ / "out.h5part";
+  const std::string o = " -o " + out.string();
+  ExpectBadInput((dir_ / "missing.obj").string() + o, "missing.obj", out);
+  Write("cloud.xyz", "0 0 0\n");
+  ExpectBadInput((dir_ / "cloud.xyz").string() + o, "cloud.xyz", out);
+  Write("broken.ply", "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nend_header\n0\n");
+  ExpectBadInput((dir_ / "broken.ply").string() + o, "broken.ply", out);
+  Write("empty.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\n");
+  ExpectBadInput((dir_ / "empty.obj").string() + o, "empty.obj", out);
+  Write("nan.obj", "v 0 0 0\nv nan 0 0\nv 0 1 0\nf 1 2 3\n");
+  ExpectBadInput((dir_ / "nan.obj").string() + o, "nan.obj", out);
+  Write("inf.obj", "v 0 0 0\nv 1 0 0\nv 0 inf 0\nf 1 2 3\n");
+  ExpectBadInput((dir_ / "inf.obj").string() + o, "inf.obj", out);
+  const std::string tetra = (dir_ / "tetra.obj").string();
+  ExpectBadInput(tetra + o + " --spacing 0", "tetra.obj", out);
+  ExpectBadInput(tetra + o + " --spacing -0.02", "tetra.obj", out);
+  ExpectBadInput(tetra + o + " --spacing-ratio 0", "tetra.obj", out);
+  ExpectBadInput(tetra + o + " --spacing 0.001 --max-particles 1000", "more than the maximum", out);
+  ExpectBadInput(tetra + o + " --spacing 1e-9", "more than the maximum", out);
+  // A scene whose second solid is bad writes nothing, not even the good first solid.
+  Write("bad_scene.toml", "[[solid]]\nname = \"floor\"\nshape = \"plane\"\nsize = [1, 1, 0.1]\n\n"
+                          "[[solid]]\nname = \"prop\"\nshape = \"mesh\"\nmesh = \"nowhere.stl\"\n");
+  ExpectBadInput((dir_ / "bad_scene.toml").string() + " -o " + (dir_ / "scene_out").string(), "nowhere.stl", dir_ / "scene_out");
+}
+
+TEST_F(RimeBoundaryTool, UsageErrors) {
+  EXPECT_EQ(Run((dir_ / "tetra.obj").string()).code, 2);  // no -o
+  EXPECT_EQ(Run((dir_ / "tetra.obj").string() + " -o x.h5part --rotate 1,2").code, 2);
+}
+
+}  // namespace
