@@ -307,6 +307,30 @@ BakeResult Runner::Run() {
   std::int64_t sim_frames_seen = 0;
   const auto finished = [&](std::size_t i) { return impl.status[i] == Status::kDone || impl.status[i] == Status::kFailed || impl.status[i] == Status::kNotRun; };
 
+  // Live display: jobs finished per stage, and the simulation's frames as they appear.
+  const auto refresh_progress = [&] {
+    std::array<std::int64_t, kStageCount> stage_done{};
+    std::int64_t done = 0;
+    std::string sim_status;
+    for (std::size_t i = 0; i < n; ++i) {
+      if (!selected[i]) continue;
+      if (finished(i)) ++done, ++stage_done[static_cast<int>(jobs_[i].stage)];
+      if (impl.status[i] == Status::kRunning && jobs_[i].stage == Stage::kSim) {
+        const std::int64_t frames = static_cast<std::int64_t>(jobs_[i].outputs.size()) - 2;
+        while (sim_frames_seen < frames && fs::exists(io::FramePath(layout_.sim(), "particles", sim_frames_seen, "h5part"))) ++sim_frames_seen;
+        sim_status = fmt::format("sim frame {}/{}", std::max<std::int64_t>(0, sim_frames_seen - 1), frames - 1);
+      }
+    }
+    std::string status;
+    for (int s = 0; s < kStageCount; ++s) {
+      if (!stage_total[s]) continue;
+      if (!status.empty()) status += ", ";
+      status += s == static_cast<int>(Stage::kSim) && !sim_status.empty() ? sim_status
+                                                                            : fmt::format("{} {}/{}", StageName(Stage(s)), stage_done[s], stage_total[s]);
+    }
+    progress.Update(done, status);
+  };
+
   std::unique_lock lock(impl.mutex);
   while (true) {
     if (Interrupted()) impl.stop = true;
@@ -362,31 +386,12 @@ BakeResult Runner::Run() {
     }
     if (running == 0 && (impl.stop || !waiting)) break;
 
-    // Live display: jobs finished per stage, and the simulation's frames as they appear.
-    std::array<std::int64_t, kStageCount> stage_done{};
-    std::int64_t done = 0;
-    std::string sim_status;
-    for (std::size_t i = 0; i < n; ++i) {
-      if (!selected[i]) continue;
-      if (finished(i)) ++done, ++stage_done[static_cast<int>(jobs_[i].stage)];
-      if (impl.status[i] == Status::kRunning && jobs_[i].stage == Stage::kSim) {
-        const std::int64_t frames = static_cast<std::int64_t>(jobs_[i].outputs.size()) - 2;
-        while (sim_frames_seen < frames && fs::exists(io::FramePath(layout_.sim(), "particles", sim_frames_seen, "h5part"))) ++sim_frames_seen;
-        sim_status = fmt::format("sim frame {}/{}", std::max<std::int64_t>(0, sim_frames_seen - 1), frames - 1);
-      }
-    }
-    std::string status;
-    for (int s = 0; s < kStageCount; ++s) {
-      if (!stage_total[s]) continue;
-      if (!status.empty()) status += ", ";
-      status += s == static_cast<int>(Stage::kSim) && !sim_status.empty() ? sim_status
-                                                                            : fmt::format("{} {}/{}", StageName(Stage(s)), stage_done[s], stage_total[s]);
-    }
-    progress.Update(done, status);
+    refresh_progress();
     impl.wake.wait_for(lock, std::chrono::milliseconds(200));
   }
   for (std::size_t i = 0; i < n; ++i)
     if (impl.status[i] == Status::kPending) ++impl.result.stages[static_cast<int>(jobs_[i].stage)].not_run;
+  refresh_progress();
   lock.unlock();
   for (auto& t : threads)
     if (t.joinable()) t.join();

@@ -130,6 +130,7 @@ TEST_F(Bake, FirstRunBakesEverythingAndSecondRunExecutesNothing) {
   EXPECT_TRUE(fs::exists(Out() / "cache/.rime-bake/state.json"));
   EXPECT_TRUE(fs::is_empty(Out() / "cache/.rime-bake/incomplete"));
   EXPECT_NE(output_.find("cleanup"), std::string::npos) << "summary table expected:\n" << output_;
+  EXPECT_NE(output_.find("preview stage skipped: blender is not on PATH"), std::string::npos) << output_;
 
   ASSERT_EQ(RunBake(), 0) << output_;
   EXPECT_TRUE(Invocations().empty()) << output_;
@@ -328,6 +329,50 @@ TEST_F(Bake, TargetStopsAtItsStageAndCleanRemovesEverything) {
   ASSERT_EQ(RunBake("--clean"), 0) << output_;
   EXPECT_FALSE(fs::exists(Out()));
   EXPECT_EQ(RunBake("nonsense"), 2) << output_;
+}
+
+TEST_F(Bake, PreviewRendersEveryCleanedFrameWhenBlenderIsOnPath) {
+  testing::WriteFakePreviewTools(root_ / "preview_tools");
+  const std::string path = getenv("PATH");
+  setenv("PATH", ((root_ / "preview_tools").string() + ":" + path).c_str(), 1);
+  const int code = RunBake();
+  ASSERT_EQ(code, 0) << output_;
+  EXPECT_EQ(Invocations()["blender"], kLastFrame + 1) << output_;
+  EXPECT_EQ(Invocations()["ffmpeg"], 2) << "contact sheet and MP4:\n" << output_;
+  for (int f = 0; f <= kLastFrame; ++f) EXPECT_TRUE(fs::exists(Out() / fmt::format("preview/frame.{:04}.png", f))) << f;
+  EXPECT_TRUE(fs::exists(Out() / "preview/contact_sheet.png"));
+  EXPECT_TRUE(fs::exists(Out() / "preview/preview.mp4"));
+  EXPECT_TRUE(fs::exists(Out() / "cache/preview/render_preview.py"));
+  ASSERT_EQ(RunBake(), 0) << output_;
+  EXPECT_TRUE(Invocations().empty()) << output_;
+  WriteFile(scene_, ReadFile(scene_) + "[bake]\npreview_width = 640\n");  // only the preview reads [bake]
+  ASSERT_EQ(RunBake(), 0) << output_;
+  setenv("PATH", path.c_str(), 1);
+  EXPECT_EQ(Invocations(), (Counts{{"blender", kLastFrame + 1}, {"ffmpeg", 2}})) << output_;
+}
+
+TEST_F(Bake, InterruptStopsTheBakeAndTheRerunResumes) {
+  setenv("FAKE_SIM_SLEEP", "0.4", 1);
+  const std::string bake = RIME_BINARY_DIR "/bin/rime-bake";
+  std::vector<std::string> args = {bake, scene_.string(), "--tools", (root_ / "tools").string(), "-o", Out().string(), "-q"};
+  std::vector<char*> argv;
+  for (auto& a : args) argv.push_back(a.data());
+  argv.push_back(nullptr);
+  pid_t pid = 0;
+  ASSERT_EQ(posix_spawn(&pid, bake.c_str(), nullptr, nullptr, argv.data(), environ), 0);
+  const fs::path second_frame = Out() / "cache/sim/particles.0001.h5part";
+  for (int k = 0; k < 200 && !fs::exists(second_frame); ++k) std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  kill(pid, SIGINT);  // like Ctrl-C, but only to rime-bake: it must stop the running tool itself
+  int status = 0;
+  waitpid(pid, &status, 0);
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 130);
+  EXPECT_FALSE(fs::exists(Out() / "surface"));
+  unsetenv("FAKE_SIM_SLEEP");
+  ASSERT_EQ(RunBake(), 0) << output_;
+  const auto lines = InvocationLines();
+  ASSERT_FALSE(lines.empty());
+  EXPECT_NE(lines.front().find("--resume"), std::string::npos) << lines.front();
 }
 
 TEST_F(Bake, BadBakeTableNamesFileLineAndField) {

@@ -65,6 +65,28 @@ for ext in obj ply json; do
 done
 )SH";
 
+// Preview tools: `blender ... -- --setup J --ice OBJ --water OBJ --output PNG` and `ffmpeg ... OUT`.
+constexpr const char* kBlender = R"SH(
+while [ $# -gt 0 ]; do case "$1" in --ice) ice=$2; shift ;; --output) png=$2; shift ;; esac; shift; done
+mkdir -p "$(dirname "$png")"
+{ echo png; cat "$ice"; } > "$png.tmp"; mv "$png.tmp" "$png"
+)SH";
+
+constexpr const char* kFfmpeg = R"SH(
+for last; do :; done
+echo "assembled" > "$last"
+)SH";
+
+/// Writes fake `blender` and `ffmpeg` into `folder` (put it on PATH to enable the preview stage).
+inline void WriteFakePreviewTools(const std::filesystem::path& folder) {
+  std::filesystem::create_directories(folder);
+  for (const auto& [name, body] : {std::pair{"blender", kBlender}, std::pair{"ffmpeg", kFfmpeg}}) {
+    const auto path = folder / name;
+    std::ofstream(path) << kPreamble << body;
+    chmod(path.c_str(), 0755);
+  }
+}
+
 inline void WriteFakeTools(const std::filesystem::path& folder) {
   std::filesystem::create_directories(folder);
   const std::pair<const char*, const char*> tools[] = {
