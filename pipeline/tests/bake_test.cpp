@@ -152,12 +152,12 @@ TEST_F(Bake, TouchingFilesWithoutChangingThemRerunsNothing) {
   EXPECT_TRUE(Invocations().empty()) << output_;
 }
 
-// A [surface] key the scene loader accepts (the surface stage owns that table and its names).
-std::string AcceptedSurfaceKey() {
-  for (const char* key : {"voxel_size = 0.01", "voxel_ratio = 0.5", "iso_value = 0.5", "smoothing_iterations = 2", "k_r = 4.0",
-                          "resolution = 200", "mode = \"isotropic\"", "water = true"}) {
+// A key of `section` the scene loader accepts: those tables belong to rime-surface and rime-clean,
+// whose settings may not be merged yet, so the test probes a few likely names.
+std::string AcceptedKey(const std::string& section, const std::vector<std::string>& candidates) {
+  for (const auto& key : candidates) {
     try {
-      io::ParseScene(std::string(kScene) + "\n[surface]\n" + key + "\n", "probe.toml");
+      io::ParseScene(std::string(kScene) + "\n[" + section + "]\n" + key + "\n", "probe.toml");
       return key;
     } catch (const Error&) {
     }
@@ -166,13 +166,24 @@ std::string AcceptedSurfaceKey() {
 }
 
 TEST_F(Bake, ChangingASurfaceParameterRerunsSurfaceAndCleanupOnly) {
-  const std::string key = AcceptedSurfaceKey();
+  const std::string key = AcceptedKey("surface", {"voxel_size = 0.01", "voxel_ratio = 0.5", "iso_value = 0.5", "smoothing_iterations = 2",
+                                                  "k_r = 4.0", "resolution = 200", "mode = \"isotropic\"", "water = true"});
   if (key.empty()) GTEST_SKIP() << "the scene loader accepts no [surface] key yet (rime-surface's settings are not merged)";
   ASSERT_EQ(RunBake(), 0) << output_;
   WriteFile(scene_, ReadFile(scene_) + "\n[surface]\n" + key + "\n");
   ASSERT_EQ(RunBake("--explain"), 0) << output_;
   EXPECT_EQ(Invocations(), (Counts{{"rime-surface", kLastFrame + 1}, {"rime-clean", kLastFrame + 1}})) << output_;
   EXPECT_NE(output_.find("scene section [surface]"), std::string::npos) << output_;
+}
+
+TEST_F(Bake, ChangingACleanupParameterRerunsCleanupOnly) {
+  const std::string key = AcceptedKey("cleanup", {"max_hole_edges = 100", "min_component_faces = 32", "fill_holes = false"});
+  if (key.empty()) GTEST_SKIP() << "the scene loader accepts no [cleanup] key yet (rime-clean's settings are not merged)";
+  ASSERT_EQ(RunBake(), 0) << output_;
+  WriteFile(scene_, ReadFile(scene_) + "\n[cleanup]\n" + key + "\n");
+  ASSERT_EQ(RunBake("--explain"), 0) << output_;
+  EXPECT_EQ(Invocations(), (Counts{{"rime-clean", kLastFrame + 1}})) << output_;
+  EXPECT_NE(output_.find("scene section [cleanup] changed"), std::string::npos) << output_;
 }
 
 TEST_F(Bake, RerunWithIdenticalOutputCutsOffDownstream) {
