@@ -1,0 +1,314 @@
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "rime/core/error.h"
+#include "rime/io/scene.h"
+#include "rime/meshfix/clean.h"
+#include "rime/meshfix/procedural.h"
+
+namespace rime::meshfix {
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+
+/// Distance from each point to `surface`: TransferVelocities with velocity = position returns
+/// the nearest surface point itself (barycentric interpolation of a linear field is exact).
+std::vector<double> DistancesTo(const io::TriMesh& surface, const std::vector<Vec3f>& points) {
+  io::TriMesh with_positions = surface;
+  with_positions.velocities = surface.positions;
+  const std::vector<Vec3f> nearest = TransferVelocities(with_positions, points);
+  std::vector<double> d(points.size());
+  for (std::size_t i = 0; i < points.size(); ++i) d[i] = Norm(Vec3d(points[i]) - Vec3d(nearest[i]));
+  return d;
+}
+
+/// Vertices plus edge midpoints and face centroids: a denser sample of the surface than vertices.
+std::vector<Vec3f> SurfaceSamples(const io::TriMesh& m) {
+  std::vector<Vec3f> s = m.positions;
+  for (const auto& t : m.triangles) {
+    const Vec3f a = m.positions[t[0]], b = m.positions[t[1]], c = m.positions[t[2]];
+    s.push_back((a + b + c) / 3.0f);
+    s.push_back((a + b) * 0.5f);
+  }
+  return s;
+}
+
+/// Symmetric Hausdorff distance estimated on vertices, edge midpoints and centroids of both meshes.
+double HausdorffDistance(const io::TriMesh& a, const io::TriMesh& b) {
+  double h = 0;
+  for (double d : DistancesTo(b, SurfaceSamples(a))) h = std::max(h, d);
+  for (double d : DistancesTo(a, SurfaceSamples(b))) h = std::max(h, d);
+  return h;
+}
+
+TEST(Clean, TransferVelocitiesIsExactAtInputVerticesAndLinearInside) {
+  io::TriMesh sphere = procedural::Icosphere(1.0, 3);
+  for (const Vec3f& p : sphere.positions) sphere.velocities.push_back(Vec3f(2 * p.x + 1, -p.z, 0.5f));
+  const std::vector<Vec3f> at_vertices = TransferVelocities(sphere, sphere.positions);
+  for (std::size_t i = 0; i < sphere.positions.size(); ++i) {
+    EXPECT_LT(Norm(at_vertices[i] - sphere.velocities[i]), 1e-5f) << i;
+  }
+  // The centroid of a face (pushed outward a bit) gets the mean of its corners' velocities.
+  const auto& t = sphere.triangles[17];
+  const Vec3f centroid = (sphere.positions[t[0]] + sphere.positions[t[1]] + sphere.positions[t[2]]) / 3.0f;
+  const Vec3f v = TransferVelocities(sphere, {centroid * 1.001f})[0];
+  const Vec3f expected = (sphere.velocities[t[0]] + sphere.velocities[t[1]] + sphere.velocities[t[2]]) / 3.0f;
+  EXPECT_NEAR(v.x, expected.x, 1e-5);
+  EXPECT_NEAR(v.y, expected.y, 1e-5);
+  EXPECT_NEAR(v.z, expected.z, 1e-5);
+}
+
+// Acceptance: a noisy sphere with specks and a hole comes out as one closed manifold component
+// whose volume is within 1% of the input sphere's.
+TEST(Clean, NoisySphereWithSpecksAndHoleBecomesOneClosedComponent) {
+  io::TriMesh sphere = procedural::Icosphere(1.0, 5);  // 20480 faces, edge ~0.035 m
+  procedural::AddRadialNoise(sphere, 0.004, 42);
+  const double sphere_volume = ComputeStats(sphere).volume;
+  ASSERT_NEAR(sphere_volume, 4.0 / 3.0 * kPi, 0.02 * 4.0 / 3.0 * kPi);
+
+  io::TriMesh input = sphere;
+  procedural::PunchHole(input, {0, 0, 1}, 0.12);  // a hole of about 40 border edges
+  for (int i = 0; i < 6; ++i) {                     // ice specks: tiny separate spheres
+    io::TriMesh speck = procedural::Icosphere(0.02, 0, {1.3 + 0.1 * i, 0.2 * i, -0.3});  // 20 faces
+    procedural::Append(input, speck);
+  }
+  const MeshStats in = ComputeStats(input);
+  ASSERT_EQ(in.components, 7u);
+  ASSERT_GT(in.boundary_edges, 20u);
+
+  const CleanResult r = Clean(input, io::CleanupSettings{});
+  const MeshStats& out = r.report.after;
+  EXPECT_EQ(out.components, 1u);
+  EXPECT_EQ(out.boundary_edges, 0u);
+  EXPECT_EQ(out.non_manifold_edges, 0u);
+  EXPECT_EQ(out.non_manifold_vertices, 0u);
+  EXPECT_TRUE(r.report.closed());
+  EXPECT_TRUE(r.report.manifold());
+  EXPECT_EQ(r.report.components_removed, 6u);
+  EXPECT_EQ(r.report.holes_filled, 1u);
+  EXPECT_EQ(r.report.repair_path, "direct");
+  EXPECT_NEAR(out.volume, sphere_volume, 0.01 * sphere_volume);
+  // Default decimation halves the faces.
+  EXPECT_NEAR(double(out.faces), 0.5 * double(in.faces - 6 * 20), 0.02 * double(in.faces));
+  EXPECT_GE(r.report.self_intersecting_pairs, 0);
+  // The report's own check agrees with a recount of the returned mesh.
+  EXPECT_EQ(ComputeStats(r.mesh).faces, out.faces);
+  EXPECT_TRUE(r.report.warnings.empty()) << r.report.warnings.front();
+  EXPECT_FALSE(SummaryLine(r.report).empty());
+  EXPECT_EQ(ToJson(r.report)["after"]["components"], 1);
+}
+
+// Acceptance: decimation to half the faces keeps the Hausdorff distance under a stated bound:
+// 0.25 x the mean input edge length (here about 9 mm on a 1 m sphere with 35 mm edges).
+TEST(Clean, DecimationToHalfKeepsHausdorffDistanceSmall) {
+  io::TriMesh sphere = procedural::Icosphere(1.0, 5);
+  procedural::AddRadialNoise(sphere, 0.002, 7);
+  io::CleanupSettings only_decimate;
+  only_decimate.smooth = "none";
+  only_decimate.self_intersections = "off";
+  only_decimate.decimate_ratio = 0.5;
+  const CleanResult r = Clean(sphere, only_decimate);
+  const double mean_edge = r.report.before.mean_edge_length;
+  EXPECT_NEAR(double(r.mesh.triangle_count()), 0.5 * double(sphere.triangle_count()), 0.01 * double(sphere.triangle_count()));
+  const double hausdorff = HausdorffDistance(sphere, r.mesh);
+  EXPECT_LT(hausdorff, 0.25 * mean_edge) << "mean edge " << mean_edge;
+  EXPECT_GT(hausdorff, 0.0);
+  std::printf("decimation to half: Hausdorff %.5f m = %.3f mean edges\n", hausdorff, hausdorff / mean_edge);
+
+  // An error bound stops the collapse earlier: fewer faces removed, smaller distance.
+  io::CleanupSettings bounded = only_decimate;
+  bounded.decimate_ratio = 0.1;
+  bounded.decimate_max_error = 0.0005;
+  const CleanResult b = Clean(sphere, bounded);
+  EXPECT_GT(b.mesh.triangle_count(), std::size_t(0.1 * double(sphere.triangle_count())));
+  EXPECT_LT(b.mesh.triangle_count(), sphere.triangle_count());
+}
+
+// Acceptance: a linear velocity field v = A x + b survives remeshing within 1%.
+TEST(Clean, LinearVelocityFieldSurvivesRemeshing) {
+  io::TriMesh sphere = procedural::Icosphere(1.0, 4);
+  const auto field = [](const Vec3f& x) { return Vec3f(0.5f * x.x - 2 * x.y + 3, x.z + 1, -x.x + 0.25f * x.y - 2); };
+  for (const Vec3f& p : sphere.positions) sphere.velocities.push_back(field(p));
+  io::CleanupSettings s;
+  s.remesh = true;
+  s.target_edge_factor = 0.7;  // creates many new vertices
+  s.remesh_iterations = 2;
+  const CleanResult r = Clean(sphere, s);
+  ASSERT_EQ(r.mesh.velocities.size(), r.mesh.positions.size());
+  EXPECT_TRUE(r.report.velocities);
+  double max_error = 0, max_speed = 0;
+  for (std::size_t i = 0; i < r.mesh.positions.size(); ++i) {
+    max_error = std::max(max_error, double(Norm(r.mesh.velocities[i] - field(r.mesh.positions[i]))));
+    max_speed = std::max(max_speed, double(Norm(field(r.mesh.positions[i]))));
+  }
+  EXPECT_LT(max_error, 0.01 * max_speed) << "max error " << max_error << " of " << max_speed;
+  EXPECT_GT(r.report.target_edge, 0.0);
+  // The remeshed mesh really has new vertices (not just the input ones).
+  EXPECT_NE(r.mesh.positions.size(), sphere.positions.size());
+}
+
+TEST(Clean, EveryOperationCanBeSwitchedOff) {
+  io::TriMesh sphere = procedural::Icosphere(1.0, 3);
+  procedural::PunchHole(sphere, {0, 0, 1}, 0.2);
+  io::CleanupSettings none;
+  none.remove_degenerate = false;
+  none.remove_components = false;
+  none.fill_holes = false;
+  none.smooth = "none";
+  none.decimate = false;
+  none.self_intersections = "off";
+  const CleanResult r = Clean(sphere, none);
+  // Same triangles (the hole left one vertex unused, which is dropped, so compare positions).
+  ASSERT_EQ(r.mesh.triangle_count(), sphere.triangle_count());
+  for (std::size_t f = 0; f < sphere.triangle_count(); ++f) {
+    std::array<Vec3f, 3> a, b;
+    for (int k = 0; k < 3; ++k) a[k] = sphere.positions[sphere.triangles[f][k]], b[k] = r.mesh.positions[r.mesh.triangles[f][k]];
+    const bool rotated = (a[0] == b[0] && a[1] == b[1]) || (a[0] == b[1] && a[1] == b[2]) || (a[0] == b[2] && a[1] == b[0]);
+    EXPECT_TRUE(rotated) << f;
+  }
+  EXPECT_GT(r.report.after.boundary_edges, 0u);
+  EXPECT_FALSE(r.report.warnings.empty());  // "not closed"
+  EXPECT_EQ(r.report.operations.size(), 1u);  // only loading
+}
+
+TEST(Clean, SmoothingAndShapeSmoothingKeepVolume) {
+  io::TriMesh sphere = procedural::Icosphere(1.0, 4);
+  procedural::AddRadialNoise(sphere, 0.01, 3);
+  const double volume = ComputeStats(sphere).volume;
+  for (const char* mode : {"tangential", "angle"}) {
+    io::CleanupSettings s;
+    s.smooth = mode;
+    s.shape_smooth_iterations = 2;
+    s.decimate = false;
+    const CleanResult r = Clean(sphere, s);
+    EXPECT_NEAR(r.report.after.volume, volume, 0.01 * volume) << mode;
+    EXPECT_TRUE(r.report.closed()) << mode;
+  }
+}
+
+// Bad input: empty mesh and NaN vertices are errors naming the problem (the tool adds the file).
+TEST(Clean, EmptyAndNanInputAreInputErrors) {
+  try {
+    Clean(io::TriMesh{}, io::CleanupSettings{});
+    ADD_FAILURE() << "empty mesh accepted";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), ExitCode::kBadInput);
+    EXPECT_NE(std::string(e.what()).find("empty"), std::string::npos);
+  }
+  io::TriMesh nan = procedural::Icosphere(1.0, 1);
+  nan.positions[5].z = std::nanf("");
+  try {
+    Clean(nan, io::CleanupSettings{});
+    ADD_FAILURE() << "NaN accepted";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), ExitCode::kBadInput);
+    EXPECT_NE(std::string(e.what()).find("vertex 5"), std::string::npos) << e.what();
+  }
+}
+
+// Bad input: non-manifold meshes are repaired through the polygon soup path, or flagged.
+TEST(Clean, NonManifoldInputIsRepairedOrFlagged) {
+  // Two spheres welded at one vertex (bow-tie) plus a fin on an edge.
+  io::TriMesh a = procedural::Icosphere(1.0, 3);
+  io::TriMesh b = procedural::Icosphere(1.0, 3, {2, 0, 0});
+  const std::uint32_t touch_a = 0;  // find a's vertex nearest +x and b's nearest -x, weld them
+  std::uint32_t ia = 0, ib = 0;
+  for (std::uint32_t i = 0; i < a.positions.size(); ++i) {
+    if (a.positions[i].x > a.positions[ia].x) ia = i;
+    if (b.positions[i].x < b.positions[ib].x) ib = i;
+  }
+  (void)touch_a;
+  io::TriMesh m = a;
+  procedural::Append(m, b);
+  const std::uint32_t welded = ib + std::uint32_t(a.positions.size());
+  for (auto& t : m.triangles)
+    for (auto& v : t)
+      if (v == welded) v = ia;
+  m.positions.push_back({0, 0, 3});
+  m.triangles.push_back({m.triangles[0][0], m.triangles[0][1], std::uint32_t(m.positions.size() - 1)});
+  const MeshStats in = ComputeStats(m);
+  ASSERT_GT(in.non_manifold_edges + in.non_manifold_vertices, 0u);
+
+  io::CleanupSettings s;
+  s.decimate = false;
+  s.repair = "always";
+  const CleanResult r = Clean(m, s);
+  EXPECT_EQ(r.report.repair_path, "soup");
+  EXPECT_EQ(r.report.after.non_manifold_edges, 0u);
+  EXPECT_EQ(r.report.after.non_manifold_vertices, 0u);
+  EXPECT_EQ(r.report.before.non_manifold_edges, in.non_manifold_edges);
+
+  // "auto" drops the few non-manifold faces, splits the bow-tie vertex and fills the holes.
+  s.repair = "auto";
+  const CleanResult automatic = Clean(m, s);
+  EXPECT_EQ(automatic.report.repair_path, "direct") << automatic.report.operations[0].detail;
+  EXPECT_TRUE(automatic.report.manifold());
+  EXPECT_EQ(automatic.report.after.components, 2u);
+
+  // With repair = "never" the offending faces are dropped and the report says so.
+  s.repair = "never";
+  const CleanResult never = Clean(m, s);
+  EXPECT_GT(never.report.faces_dropped_on_load, 0u);
+  EXPECT_FALSE(never.report.warnings.empty());
+}
+
+TEST(Clean, UnweldedTrianglesAreWeldedBySoupRepair) {
+  const io::TriMesh sphere = procedural::Icosphere(1.0, 2);
+  io::TriMesh soup;
+  for (const auto& t : sphere.triangles) {
+    const std::uint32_t base = std::uint32_t(soup.positions.size());
+    for (std::uint32_t v : t) soup.positions.push_back(sphere.positions[v]);
+    soup.triangles.push_back({base, base + 1, base + 2});
+  }
+  io::CleanupSettings s;
+  s.decimate = false;
+  s.remove_components = false;
+  const CleanResult r = Clean(soup, s);
+  EXPECT_EQ(r.report.repair_path, "soup");
+  EXPECT_EQ(r.report.after.components, 1u);
+  EXPECT_TRUE(r.report.closed());
+}
+
+TEST(Clean, InwardMeshIsReoriented) {
+  io::TriMesh sphere = procedural::Icosphere(1.0, 3);
+  for (auto& t : sphere.triangles) std::swap(t[1], t[2]);
+  ASSERT_LT(ComputeStats(sphere).volume, 0);
+  io::CleanupSettings s;
+  s.decimate = false;
+  EXPECT_GT(Clean(sphere, s).report.after.volume, 0);
+}
+
+TEST(CleanupScene, ReadsFieldsAndChecksRanges) {
+  const io::Scene scene = io::ParseScene(R"(
+[cleanup]
+remesh = true
+target_edge = 0.004
+decimate_ratio = 0.25
+min_component_faces = 10
+smooth = "angle"
+self_intersections = "remove"
+)",
+                                         "clean.toml");
+  EXPECT_TRUE(scene.cleanup.remesh);
+  EXPECT_DOUBLE_EQ(scene.cleanup.target_edge, 0.004);
+  EXPECT_DOUBLE_EQ(scene.cleanup.decimate_ratio, 0.25);
+  EXPECT_EQ(scene.cleanup.min_component_faces, 10);
+  EXPECT_EQ(scene.cleanup.smooth, "angle");
+  EXPECT_EQ(scene.cleanup.self_intersections, "remove");
+  EXPECT_TRUE(scene.cleanup.fill_holes);  // default kept
+
+  for (const char* bad : {"[cleanup]\ndecimate_ratio = 1.5\n", "[cleanup]\nsmooth = \"laplace\"\n",
+                          "[cleanup]\nmax_hole_edges = 2\n", "[cleanup]\ndecimat = true\n"}) {
+    try {
+      io::ParseScene(bad, "clean.toml");
+      ADD_FAILURE() << "accepted " << bad;
+    } catch (const Error& e) {
+      EXPECT_EQ(e.code(), ExitCode::kBadInput);
+      EXPECT_NE(std::string(e.what()).find("clean.toml"), std::string::npos) << e.what();
+    }
+  }
+}
+
+}  // namespace
+}  // namespace rime::meshfix

@@ -1,0 +1,294 @@
+// rime-clean: production cleanup of rime-surface meshes with CGAL, one frame at a time.
+// Thin: parse options, find the frames, run meshfix::Clean on each (frames in parallel with -j),
+// write meshes, reports and a summary.
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <filesystem>
+#include <mutex>
+#include <optional>
+#include <regex>
+
+#include "rime/core/atomic_file.h"
+#include "rime/core/error.h"
+#include "rime/core/log.h"
+#include "rime/core/progress.h"
+#include "rime/exec/device.h"
+#include "rime/io/mesh.h"
+#include "rime/io/particles.h"
+#include "rime/io/scene.h"
+#include "rime/meshfix/clean.h"
+#include "tool.h"
+
+namespace fs = std::filesystem;
+using namespace rime;
+
+namespace {
+
+struct Frame {
+  fs::path input, output;
+  std::string stem;      // "ice" of ice.0012.obj
+  std::int64_t number = -1;  // -1: no frame number in the name
+};
+
+bool IsMeshFile(const fs::path& p) {
+  std::string ext = p.extension().string();
+  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return char(std::tolower(c)); });
+  return ext == ".obj" || ext == ".ply";
+}
+
+/// "ice.0012.obj" -> ("ice", 12); "ice_12.ply" -> ("ice", 12); "ball.obj" -> ("ball", -1).
+Frame ParseName(const fs::path& input) {
+  Frame f;
+  f.input = input;
+  static const std::regex numbered(R"(^(.*?)[._-]?(\d+)$)");
+  const std::string stem = input.stem().string();
+  std::smatch m;
+  if (std::regex_match(stem, m, numbered) && !m[1].str().empty()) {
+    f.stem = m[1];
+    f.number = std::stoll(m[2]);
+  } else {
+    f.stem = stem;
+  }
+  return f;
+}
+
+/// Overrides: options given on the command line replace the scene's (or default) values.
+struct Overrides {
+  std::optional<std::string> repair, smooth, self_intersections;
+  std::optional<bool> remesh;
+  std::optional<int> min_component_faces, max_hole_edges, remesh_iterations, smooth_iterations, shape_smooth_iterations;
+  std::optional<double> cap_angle, needle_ratio, min_component_area, min_component_volume, target_edge, target_edge_factor,
+      shape_smooth_time, decimate_ratio, decimate_max_error;
+  std::optional<long long> decimate_faces;
+  bool no_degenerate = false, almost_degenerate = false, no_components = false, no_fill_holes = false, no_fair = false,
+       no_decimate = false, no_velocity = false;
+
+  void ApplyTo(io::CleanupSettings& s) const {
+    if (repair) s.repair = *repair;
+    if (no_degenerate) s.remove_degenerate = false;
+    if (almost_degenerate) s.remove_almost_degenerate = true;
+    if (cap_angle) s.cap_angle_deg = *cap_angle;
+    if (needle_ratio) s.needle_ratio = *needle_ratio;
+    if (no_components) s.remove_components = false;
+    if (min_component_faces) s.min_component_faces = *min_component_faces;
+    if (min_component_area) s.min_component_area = *min_component_area;
+    if (min_component_volume) s.min_component_volume = *min_component_volume;
+    if (no_fill_holes) s.fill_holes = false;
+    if (max_hole_edges) s.max_hole_edges = *max_hole_edges;
+    if (no_fair) s.fair_holes = false;
+    if (remesh) s.remesh = *remesh;
+    if (target_edge) s.target_edge = *target_edge, s.remesh = remesh.value_or(true);
+    if (target_edge_factor) s.target_edge_factor = *target_edge_factor;
+    if (remesh_iterations) s.remesh_iterations = *remesh_iterations;
+    if (smooth) s.smooth = *smooth;
+    if (smooth_iterations) s.smooth_iterations = *smooth_iterations;
+    if (shape_smooth_iterations) s.shape_smooth_iterations = *shape_smooth_iterations;
+    if (shape_smooth_time) s.shape_smooth_time = *shape_smooth_time;
+    if (no_decimate) s.decimate = false;
+    if (decimate_ratio) s.decimate_ratio = *decimate_ratio;
+    if (decimate_faces) s.decimate_faces = *decimate_faces;
+    if (decimate_max_error) s.decimate_max_error = *decimate_max_error;
+    if (self_intersections) s.self_intersections = *self_intersections;
+    if (no_velocity) s.transfer_velocity = false;
+  }
+};
+
+/// Adds the file to an error raised without one (meshfix does not know file names).
+[[noreturn]] void Rethrow(const Error& e, const fs::path& file) {
+  throw Error(e.code(), e.message(), e.where().empty() ? file.string() : e.where());
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{
+      "Cleans rime-surface meshes with CGAL 5.5, frame by frame: repairs and orients the polygon soup, removes degenerate\n"
+      "faces and small components (ice specks), fills small holes, optionally remeshes, smooths, decimates, and reports\n"
+      "self-intersections. Per-vertex velocities (PLY vx vy vz) are carried to the output from the nearest input point.\n"
+      "Lengths in m, areas in m^2, volumes in m^3. Defaults come from [cleanup] of --scene, else the built-in ones shown."};
+  tool::CommonOptions common;
+  tool::Setup(app, "rime-clean", common, tool::kThreads | tool::kFrames | tool::kJsonSummary);
+  app.get_option("-j")->description("Frames cleaned in parallel, and CPU threads in all (default: all cores)");
+
+  std::vector<std::string> inputs;
+  std::string output, format, scene_file, report_file;
+  Overrides o;
+  const io::CleanupSettings d;  // defaults, for the help text
+  app.add_option("MESH", inputs, "Input meshes (.obj/.ply), or folders of them; frame numbers are read from names like ice.0012.obj")
+      ->required();
+  app.add_option("-o,--output", output,
+                 "Output file (one input), or folder: ice.0012.obj -> FOLDER/ice_clean.0012.obj")
+      ->required();
+  app.add_option("--format", format, "Output format (default: the input's extension)")->check(CLI::IsMember({"obj", "ply"}));
+  app.add_option("--scene", scene_file, "Scene file whose [cleanup] section gives the defaults (options below override it)");
+  app.add_option("--report", report_file, "Write every frame's quality report to this JSON file");
+
+  auto* g = app.add_option_group("Operations (in this order)");
+  g->add_option("--repair", o.repair, "1. Soup repair: auto (only when the faces are not a manifold mesh), always, never [" + d.repair + "]")
+      ->check(CLI::IsMember({"auto", "always", "never"}));
+  g->add_flag("--no-degenerate", o.no_degenerate, "2. Keep zero-area faces");
+  g->add_flag("--almost-degenerate", o.almost_degenerate, "2. Also remove caps and needles (CGAL experimental, slow)");
+  g->add_option("--cap-angle", o.cap_angle, fmt::format("2. Cap: a triangle angle above this, degrees [{}]", d.cap_angle_deg));
+  g->add_option("--needle-ratio", o.needle_ratio, fmt::format("2. Needle: longest/shortest edge above this [{}]", d.needle_ratio));
+  g->add_flag("--no-components", o.no_components, "3. Keep all connected components");
+  g->add_option("--min-component-faces", o.min_component_faces,
+                fmt::format("3. Remove components with fewer faces (the largest always stays) [{}]", d.min_component_faces))
+      ->check(CLI::NonNegativeNumber);
+  g->add_option("--min-component-area", o.min_component_area, "3. ... or a smaller area, m^2 (0 = off) [0]")->check(CLI::NonNegativeNumber);
+  g->add_option("--min-component-volume", o.min_component_volume, "3. ... or a smaller volume (closed ones), m^3 (0 = off) [0]")
+      ->check(CLI::NonNegativeNumber);
+  g->add_flag("--no-fill-holes", o.no_fill_holes, "4. Leave holes open");
+  g->add_option("--max-hole-edges", o.max_hole_edges, fmt::format("4. Fill holes with at most this many border edges [{}]", d.max_hole_edges))
+      ->check(CLI::Range(3, 1000000000));
+  g->add_flag("--no-fair", o.no_fair, "4. Triangulate and refine holes without fairing");
+  g->add_flag("--remesh,!--no-remesh", o.remesh, "5. Isotropic remeshing (off by default: slow, see README)");
+  g->add_option("--target-edge", o.target_edge, "5. Remeshing edge length, m (implies --remesh; default: factor x mean input edge)")
+      ->check(CLI::PositiveNumber);
+  g->add_option("--target-edge-factor", o.target_edge_factor, fmt::format("5. Target edge / mean input edge [{}]", d.target_edge_factor))
+      ->check(CLI::PositiveNumber);
+  g->add_option("--remesh-iterations", o.remesh_iterations, fmt::format("5. Remeshing iterations [{}]", d.remesh_iterations))
+      ->check(CLI::Range(1, 100));
+  g->add_option("--smooth", o.smooth, "6. tangential (relaxation, keeps volume), angle, none [" + d.smooth + "]")
+      ->check(CLI::IsMember({"tangential", "angle", "none"}));
+  g->add_option("--smooth-iterations", o.smooth_iterations, fmt::format("6. Smoothing iterations [{}]", d.smooth_iterations))
+      ->check(CLI::Range(0, 1000));
+  g->add_option("--shape-smooth-iterations", o.shape_smooth_iterations,
+                "6. Mean-curvature-flow iterations, volume restored afterwards (0 = off) [0]")
+      ->check(CLI::Range(0, 1000));
+  g->add_option("--shape-smooth-time", o.shape_smooth_time, fmt::format("6. Mean-curvature-flow time step [{}]", d.shape_smooth_time))
+      ->check(CLI::PositiveNumber);
+  g->add_flag("--no-decimate", o.no_decimate, "7. Keep the face count");
+  g->add_option("--decimate-ratio", o.decimate_ratio, fmt::format("7. Keep this fraction of the faces [{}]", d.decimate_ratio))
+      ->check(CLI::Range(0.0, 1.0));
+  g->add_option("--decimate-faces", o.decimate_faces, "7. Target face count (overrides the ratio)")->check(CLI::PositiveNumber);
+  g->add_option("--decimate-max-error", o.decimate_max_error,
+                "7. Also stop when a collapse would cost more than this quadric error, m (0 = off) [0]")
+      ->check(CLI::NonNegativeNumber);
+  g->add_option("--self-intersections", o.self_intersections,
+                "8. report (count pairs), remove (CGAL experimental), off [" + d.self_intersections + "]")
+      ->check(CLI::IsMember({"report", "remove", "off"}));
+  g->add_flag("--no-velocity", o.no_velocity, "Drop per-vertex velocities instead of transferring them");
+
+  return tool::Main(app, argc, argv, common, [&]() -> int {
+    const auto start = std::chrono::steady_clock::now();
+    io::CleanupSettings settings;
+    if (!scene_file.empty()) settings = io::LoadScene(scene_file).cleanup;
+    o.ApplyTo(settings);
+    const tool::FrameRange range = tool::ParseFrames(common.frames);
+
+    // Inputs: files and folders of .obj/.ply, frames sorted by number, filtered by --frames.
+    std::vector<Frame> frames;
+    for (const std::string& in : inputs) {
+      const fs::path p(in);
+      std::error_code ec;
+      if (fs::is_directory(p, ec)) {
+        std::vector<fs::path> found;
+        for (const auto& entry : fs::directory_iterator(p))
+          if (entry.is_regular_file() && IsMeshFile(entry.path())) found.push_back(entry.path());
+        if (found.empty()) throw InputError("folder holds no .obj or .ply files", p.string());
+        std::sort(found.begin(), found.end());
+        for (const fs::path& f : found) frames.push_back(ParseName(f));
+      } else {
+        if (!fs::exists(p, ec)) throw InputError("mesh file not found", p.string());
+        if (!IsMeshFile(p)) throw InputError("unsupported mesh format (expected .obj or .ply)", p.string());
+        frames.push_back(ParseName(p));
+      }
+    }
+    std::erase_if(frames, [&](const Frame& f) { return f.number >= 0 && !range.Contains(f.number); });
+    if (frames.empty()) throw Error(ExitCode::kUsage, "no input frame in the --frames range", common.frames);
+    std::stable_sort(frames.begin(), frames.end(), [](const Frame& a, const Frame& b) { return a.number < b.number; });
+
+    // Outputs: one file, or names in a folder.
+    const fs::path out(output);
+    std::error_code ec;
+    const bool to_file = frames.size() == 1 && !fs::is_directory(out, ec) && IsMeshFile(out) && output.back() != '/';
+    if (frames.size() > 1 && IsMeshFile(out) && !fs::is_directory(out, ec))
+      throw Error(ExitCode::kUsage, "several inputs need an output folder, not a file", output);
+    for (Frame& f : frames) {
+      std::string ext = format.empty() ? f.input.extension().string() : "." + format;
+      std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return char(std::tolower(c)); });
+      if (to_file) {
+        f.output = out;
+        if (!format.empty()) f.output.replace_extension(ext);
+      } else if (f.number >= 0) {
+        f.output = io::FramePath(out, f.stem + "_clean", f.number, ext.substr(1));
+      } else {
+        f.output = out / (f.stem + "_clean" + ext);
+      }
+      if (fs::exists(f.output, ec) && fs::equivalent(f.output, f.input, ec))
+        throw Error(ExitCode::kUsage, "output would overwrite its input", f.output.string());
+    }
+
+    log::Info("cleaning {} frame(s) with {} thread(s)", frames.size(), exec::CpuThreads());
+    std::vector<nlohmann::json> reports(frames.size());
+    std::vector<std::string> lines(frames.size());
+    std::atomic<std::size_t> faces_in{0}, faces_out{0}, warnings{0};
+    std::atomic<bool> failed{false};
+    std::mutex error_mutex;
+    std::optional<Error> first_error;
+    Progress progress("frames", std::int64_t(frames.size()));
+    tbb::parallel_for(std::size_t(0), frames.size(), std::size_t(1), [&](std::size_t i) {
+      if (failed) return;
+      const Frame& f = frames[i];
+      try {
+        const auto t0 = std::chrono::steady_clock::now();
+        const io::TriMesh mesh = io::ReadMesh(f.input);
+        const double read_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+        meshfix::CleanResult result;
+        try {
+          result = meshfix::Clean(mesh, settings);
+        } catch (const Error& e) {
+          Rethrow(e, f.input);
+        }
+        const auto t1 = std::chrono::steady_clock::now();
+        io::WriteMesh(f.output, result.mesh);
+        const double write_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t1).count();
+        for (const std::string& w : result.report.warnings) log::Warn("{}: {}", f.input.string(), w);
+        warnings += result.report.warnings.size();
+        faces_in += result.report.before.faces;
+        faces_out += result.report.after.faces;
+        nlohmann::json j = meshfix::ToJson(result.report);
+        j["input"] = f.input.string();
+        j["output"] = f.output.string();
+        if (f.number >= 0) j["frame"] = f.number;
+        j["read_seconds"] = read_s;
+        j["write_seconds"] = write_s;
+        reports[i] = std::move(j);
+        lines[i] = f.input.filename().string() + ": " + meshfix::SummaryLine(result.report);
+        log::Debug("{}", lines[i]);
+        progress.Advance();
+      } catch (const Error& e) {
+        std::lock_guard lock(error_mutex);
+        if (!first_error) first_error = e;
+        failed = true;
+      }
+    });
+    progress.Finish();
+    if (first_error) throw *first_error;
+
+    for (const std::string& line : lines) log::Info("{}", line);
+    const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    if (!report_file.empty()) WriteFileAtomically(report_file, nlohmann::json(reports).dump(2) + "\n");
+    log::Info("{} frame(s), {} -> {} triangles in {:.2f} s ({:.0f}k input triangles/s with {} thread(s)); {} warning(s)",
+              frames.size(), faces_in.load(), faces_out.load(), seconds, faces_in / seconds / 1e3, exec::CpuThreads(),
+              warnings.load());
+    nlohmann::json summary = {{"tool", "rime-clean"},
+                              {"frames", frames.size()},
+                              {"triangles_in", faces_in.load()},
+                              {"triangles_out", faces_out.load()},
+                              {"seconds", seconds},
+                              {"input_triangles_per_second", faces_in / seconds},
+                              {"threads", exec::CpuThreads()},
+                              {"warnings", warnings.load()},
+                              {"peak_memory_bytes", tool::PeakMemoryBytes()}};
+    nlohmann::json outputs = nlohmann::json::array();
+    for (const Frame& f : frames) outputs.push_back(f.output.string());
+    summary["outputs"] = outputs;
+    summary["reports"] = reports;
+    tool::WriteSummary(common, summary);
+    return 0;
+  });
+}
