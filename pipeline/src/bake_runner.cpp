@@ -1,5 +1,9 @@
 #include "bake_runner.h"
 
+#include <fcntl.h>
+#include <sys/file.h>
+#include <unistd.h>
+
 #include <algorithm>
 #include <chrono>
 #include <condition_variable>
@@ -296,6 +300,21 @@ BakeResult Runner::Run() {
   }
 
   fs::create_directories(layout_.logs());
+  fs::create_directories(layout_.state_folder());
+  // One bake per output folder at a time: two would overwrite each other's outputs and state.
+  const fs::path lock_path = layout_.state_folder() / "lock";
+  const int lock_fd = open(lock_path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
+  if (lock_fd < 0 || flock(lock_fd, LOCK_EX | LOCK_NB) != 0) {
+    if (lock_fd >= 0) close(lock_fd);
+    BakeResult busy;
+    busy.exit_code = static_cast<int>(ExitCode::kIo);
+    busy.failure = fmt::format("another rime-bake is baking into {} (lock {})", layout_.output.string(), lock_path.string());
+    return busy;
+  }
+  struct LockRelease {
+    int fd;
+    ~LockRelease() { close(fd); }
+  } lock_release{lock_fd};
   std::size_t total = 0;
   std::array<std::int64_t, kStageCount> stage_total{};
   for (std::size_t i = 0; i < n; ++i)

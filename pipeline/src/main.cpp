@@ -43,7 +43,7 @@ int main(int argc, char** argv) {
   app.add_option("--tools", tools_folder, "Folder holding rime-boundary, rime-sim, rime-surface, rime-clean (default: rime-bake's own folder)");
   app.footer(
       "Exit codes: 0 ok (everything up to the target is up to date), 1 internal failure, 2 bad command line, 3 bad scene file or "
-      "missing stage tool, 5 cannot write the output or cache, 7 a stage failed (the message names stage, frame and log), "
+      "missing stage tool, 5 cannot write the output or cache (or another rime-bake is using it), 7 a stage failed (the message names stage, frame and log), "
       "8 --only refused (inputs missing or stale), 130 interrupted (rerun to continue; the simulation resumes).");
 
   return tool::Main(app, argc, argv, common, [&]() -> int {
@@ -113,7 +113,7 @@ int main(int argc, char** argv) {
           {"ran", st.ran}, {"cached", st.cached}, {"failed", st.failed}, {"not_run", st.not_run}, {"seconds", st.seconds}};
     }
     tool::WriteSummary(common, summary);
-    if (result.exit_code == kExitOnlyRefused) throw Error(static_cast<ExitCode>(result.exit_code), result.failure);
+    if (result.exit_code == kExitOnlyRefused || result.exit_code == static_cast<int>(ExitCode::kIo)) throw Error(static_cast<ExitCode>(result.exit_code), result.failure);
     if (!common.quiet) {
       if (dry_run) {
         int would_run = 0, up_to_date = 0;

@@ -3,6 +3,8 @@
 #include <gtest/gtest.h>
 #include <signal.h>
 #include <spawn.h>
+#include <fcntl.h>
+#include <sys/file.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -384,6 +386,18 @@ TEST_F(Bake, InterruptStopsTheBakeAndTheRerunResumes) {
   const auto lines = InvocationLines();
   ASSERT_FALSE(lines.empty());
   EXPECT_NE(lines.front().find("--resume"), std::string::npos) << lines.front();
+}
+
+TEST_F(Bake, SecondBakeIntoTheSameFolderIsRefused) {
+  fs::create_directories(Out() / "cache/.rime-bake");
+  const int fd = open((Out() / "cache/.rime-bake/lock").c_str(), O_RDWR | O_CREAT, 0644);
+  ASSERT_GE(fd, 0);
+  ASSERT_EQ(flock(fd, LOCK_EX), 0);  // as a running bake holds it
+  EXPECT_EQ(RunBake(), 5) << output_;
+  EXPECT_NE(output_.find("another rime-bake is baking into"), std::string::npos) << output_;
+  EXPECT_TRUE(Invocations().empty());
+  close(fd);
+  EXPECT_EQ(RunBake(), 0) << output_;
 }
 
 TEST_F(Bake, BadBakeTableNamesFileLineAndField) {
