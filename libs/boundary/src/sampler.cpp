@@ -5,11 +5,14 @@
 
 #include <algorithm>
 #include <array>
+#include <bit>
+#include <chrono>
 #include <cmath>
 #include <limits>
 #include <numeric>
 
 #include "rime/core/error.h"
+#include "rime/core/log.h"
 #include "rime/exec/memory.h"
 #include "rime/exec/parallel.h"
 #include "rime/neighbors/grid.h"
@@ -123,6 +126,12 @@ double EstimateSampleCount(const io::TriMesh& mesh, double spacing) {
 }
 
 SurfaceSamples SampleSurface(const io::TriMesh& mesh, const SampleOptions& options) {
+  auto phase_start = std::chrono::steady_clock::now();
+  const auto phase = [&](const char* name) {  // per-phase timings for --verbose
+    const auto now = std::chrono::steady_clock::now();
+    log::Debug("sampling {}: {:.1f} ms", name, 1e3 * std::chrono::duration<double>(now - phase_start).count());
+    phase_start = now;
+  };
   CheckInput(mesh, options);
   CheckCount(EstimateSampleCount(mesh, options.spacing), options);
   const double d = options.spacing;
@@ -150,6 +159,7 @@ SurfaceSamples SampleSurface(const io::TriMesh& mesh, const SampleOptions& optio
     weld[order[k]] = static_cast<std::uint32_t>(welded_positions.size() - 1);
   }
   const std::size_t nw = welded_positions.size();
+  phase("check + weld");
 
   // 2. Valid triangles, their area vectors, and area-weighted vertex normals.
   const std::size_t nt = mesh.triangles.size();
@@ -181,32 +191,35 @@ SurfaceSamples SampleSurface(const io::TriMesh& mesh, const SampleOptions& optio
   if (valid_count == 0)
     throw InputError(fmt::format("all {} triangles are degenerate (zero area)", nt), options.source);
 
-  // 3. Distinct edges: sort the (low, high) vertex pairs of every valid triangle.
+  phase("triangles + vertex normals");
+  // 3. Distinct edges: radix-sort the (low, high) vertex pairs of every valid triangle; invalid
+  // triangles get a key above every real one and are cut off after the sort.
   const exec::Device cpu = exec::Device::Cpu();
-  std::vector<std::uint64_t> edge_keys;
-  std::vector<std::uint32_t> edge_faces;
-  edge_keys.reserve(3 * valid_count);
-  edge_faces.reserve(3 * valid_count);
-  for (std::size_t t = 0; t < nt; ++t) {
-    if (!valid[t]) continue;
+  const int vertex_bits = std::max(1, int(std::bit_width(std::uint64_t(nw))));
+  const std::uint64_t past_last = (std::uint64_t(nw - 1) << vertex_bits) | std::uint64_t(nw - 1);
+  std::vector<std::uint64_t> edge_keys(3 * nt);
+  std::vector<std::uint32_t> edge_faces(3 * nt);
+  exec::cpu::ParallelFor(Index(nt), [&](Index t) {
     for (int k = 0; k < 3; ++k) {
       const std::uint64_t a = tris[t][k], b = tris[t][(k + 1) % 3];
-      edge_keys.push_back(std::min(a, b) << 32 | std::max(a, b));
-      edge_faces.push_back(static_cast<std::uint32_t>(t));
+      edge_keys[3 * t + k] = valid[t] ? (std::min(a, b) << vertex_bits | std::max(a, b)) : past_last;
+      edge_faces[3 * t + k] = static_cast<std::uint32_t>(t);
     }
-  }
-  exec::SortPairs(cpu, edge_keys.data(), edge_faces.data(), Index(edge_keys.size()));
+  });
+  exec::SortPairs(cpu, edge_keys.data(), edge_faces.data(), Index(edge_keys.size()), 2 * vertex_bits);
+  edge_keys.resize(3 * valid_count);
   std::vector<Edge> edges;
   for (std::size_t k = 0; k < edge_keys.size(); ++k) {
     const Vec3d& n = area_vectors[edge_faces[k]];
     if (k == 0 || edge_keys[k] != edge_keys[k - 1])
-      edges.push_back({std::uint32_t(edge_keys[k] >> 32), std::uint32_t(edge_keys[k] & 0xffffffffu), n, n});
+      edges.push_back({std::uint32_t(edge_keys[k] >> vertex_bits), std::uint32_t(edge_keys[k] & ((1ull << vertex_bits) - 1)), n, n});
     else
       edges.back().normal_sum += n;
   }
   stats.edges = edges.size();
   std::vector<std::uint64_t>().swap(edge_keys);
 
+  phase("edges");
   // 4. Count, check the total, then fill in parallel at scanned offsets.
   std::vector<std::uint32_t> used_vertices;
   for (std::size_t v = 0; v < nw; ++v)
@@ -258,39 +271,46 @@ SurfaceSamples SampleSurface(const io::TriMesh& mesh, const SampleOptions& optio
     });
   });
 
+  phase("count + fill");
   // 5. Remove particles closer than 0.5 d_b to an earlier kept one (greedy in index order:
   // vertices first, then edges, then faces), which is what the sequential loop below computes.
   if (options.remove_near_duplicates && total > 1) {
+    // Only particles with an earlier particle within the radius can be removed; find them in
+    // parallel, then run the greedy rule over those alone.
     const float radius = float(kDuplicateRadius * d);
     neighbors::UniformGrid<float> grid(cpu);
-    grid.Build(positions.data(), Index(total), radius);
-    neighbors::NeighborList close(cpu);
-    grid.Query(positions.data(), Index(total), radius, /*exclude_self=*/true, close);
-    const std::uint32_t* offsets = close.offsets.data();
-    const std::uint32_t* indices = close.indices.data();
-    std::vector<std::uint8_t> keep(total, 1);
+    grid.Build(positions.data(), Index(total), float(d));  // ~ one particle per cell on a surface
+    const neighbors::GridView<float> view = grid.view();
+    std::vector<std::uint8_t> has_earlier(total, 0), keep(total, 1);
+    exec::cpu::ParallelFor(Index(total), [&](Index i) {
+      bool earlier = false;
+      view.ForEachNeighbor(positions[i], radius, [&](std::uint32_t j, const Vec3f&, float) { earlier = earlier || j < i; });
+      has_earlier[i] = earlier;
+    });
     std::size_t removed = 0;
-    if (close.pairs() > 0)
-      for (std::size_t i = 0; i < total; ++i)
-        for (std::uint32_t k = offsets[i]; k < offsets[i + 1]; ++k)
-          if (indices[k] < i && keep[indices[k]]) {
-            keep[i] = 0;
-            ++removed;
-            break;
-          }
-    if (removed > 0) {
-      std::size_t w = 0;
-      for (std::size_t i = 0; i < total; ++i)
-        if (keep[i]) {
-          positions[w] = positions[i];
-          normals[w] = normals[i];
-          ++w;
-        }
-      positions.resize(w);
-      normals.resize(w);
+    for (std::size_t i = 0; i < total; ++i) {
+      if (!has_earlier[i]) continue;
+      bool blocked = false;
+      view.ForEachNeighbor(positions[i], radius, [&](std::uint32_t j, const Vec3f&, float) { blocked = blocked || (j < i && keep[j]); });
+      if (blocked) keep[i] = 0, ++removed;
     }
+    // Kept particles in the grid's Z-curve order: neighbours end up close in memory, which
+    // speeds up every later neighbour search over the file (volumes, the simulation).
+    std::vector<Vec3f> sorted_positions(total - removed), sorted_normals(total - removed);
+    const std::uint32_t* order = grid.order();
+    std::size_t w = 0;
+    for (std::size_t k = 0; k < total; ++k) {
+      const std::uint32_t i = order[k];
+      if (!keep[i]) continue;
+      sorted_positions[w] = positions[i];
+      sorted_normals[w] = normals[i];
+      ++w;
+    }
+    positions.swap(sorted_positions);
+    normals.swap(sorted_normals);
     stats.near_duplicates_removed = removed;
   }
+  phase("near-duplicate removal");
   out.positions = std::move(positions);
   out.normals = std::move(normals);
   return out;

@@ -1,7 +1,10 @@
 // CPU instantiation of the boundary kernel list and the host entry point of the volume computation.
 #include "rime/boundary/volumes.h"
 
+#include <chrono>
+
 #include "rime/boundary/volume_kernels.h"
+#include "rime/core/log.h"
 #include "rime/exec/kernel_list.h"
 #include "rime/exec/memory.h"
 #include "rime/exec/parallel.h"
@@ -16,9 +19,14 @@ void ComputeBoundaryVolumes(const exec::Device& device, const Vec3<T>* positions
   if (n <= 0) return;
   const CubicSpline<T> kernel(h);
   neighbors::UniformGrid<T> grid(device);
+  const auto t0 = std::chrono::steady_clock::now();
   grid.Build(positions, n, kernel.SupportRadius());
+  const auto t1 = std::chrono::steady_clock::now();
   exec::ParallelFor(device, n, kernels::BoundaryVolume<T>{grid.view(), kernel, volumes});
   exec::Synchronize(device);
+  const auto t2 = std::chrono::steady_clock::now();
+  log::Debug("boundary volumes of {} particles: grid {:.1f} ms, kernel {:.1f} ms", n,
+             1e3 * std::chrono::duration<double>(t1 - t0).count(), 1e3 * std::chrono::duration<double>(t2 - t1).count());
 }
 
 template <class T>

@@ -1,0 +1,131 @@
+// Boundary sampling throughput (issue 3): particles per second for the Stanford bunny scaled to
+// 0.5 m and for a 1-million-triangle torus, volumes included. Prints a table and writes JSON.
+//
+//   rime_bench_boundary [--repeats N] [--threads N] [--json FILE] [--mesh-dir DIR]
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cstdlib>
+#include <cstring>
+#include <functional>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "rime/boundary/sampler.h"
+#include "rime/boundary/shapes.h"
+#include "rime/boundary/volumes.h"
+#include "rime/core/log.h"
+#include "rime/exec/device.h"
+#include "rime/io/mesh_import.h"
+
+namespace {
+
+namespace fs = std::filesystem;
+using namespace rime;
+using Clock = std::chrono::steady_clock;
+
+double Seconds(Clock::time_point a, Clock::time_point b) { return std::chrono::duration<double>(b - a).count(); }
+
+double Median(std::vector<double> v) {
+  std::sort(v.begin(), v.end());
+  return v.size() % 2 ? v[v.size() / 2] : 0.5 * (v[v.size() / 2 - 1] + v[v.size() / 2]);
+}
+
+struct Case {
+  std::string name;
+  std::function<io::TriMesh()> load;  // mesh in place (timed separately)
+  double particle_spacing;            // d_p, m; d_b = d_p / 2, h = d_p
+};
+
+nlohmann::json RunCase(const Case& c, int repeats) {
+  std::vector<double> load, sample, volumes, total;
+  std::size_t triangles = 0, particles = 0;
+  for (int r = 0; r < repeats; ++r) {
+    const auto t0 = Clock::now();
+    const io::TriMesh mesh = c.load();
+    const auto t1 = Clock::now();
+    boundary::SampleOptions options;
+    options.spacing = 0.5 * c.particle_spacing;
+    const boundary::SurfaceSamples s = boundary::SampleSurface(mesh, options);
+    const auto t2 = Clock::now();
+    const std::vector<float> v = boundary::ComputeBoundaryVolumes<float>(exec::Device::Cpu(), s.positions, float(c.particle_spacing));
+    const auto t3 = Clock::now();
+    if (v.size() != s.size()) std::abort();
+    load.push_back(Seconds(t0, t1));
+    sample.push_back(Seconds(t1, t2));
+    volumes.push_back(Seconds(t2, t3));
+    total.push_back(Seconds(t1, t3));
+    triangles = mesh.triangle_count();
+    particles = s.size();
+  }
+  const double rate = double(particles) / Median(total);
+  fmt::print("| {:<28} | {:>9} | {:>9} | {:>8.3f} | {:>8.3f} | {:>8.3f} | {:>8.3f} | {:>9.2f} |\n", c.name, triangles, particles,
+             Median(load), Median(sample), Median(volumes), Median(total), rate / 1e6);
+  return {{"case", c.name},
+          {"triangles", triangles},
+          {"particles", particles},
+          {"particle_spacing", c.particle_spacing},
+          {"boundary_spacing", 0.5 * c.particle_spacing},
+          {"load_seconds_median", Median(load)},
+          {"sample_seconds_median", Median(sample)},
+          {"volume_seconds_median", Median(volumes)},
+          {"sample_and_volume_seconds_median", Median(total)},
+          {"particles_per_second", rate},
+          {"particles_per_second_with_load", double(particles) / (Median(total) + Median(load))},
+          {"repeats", repeats}};
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  int repeats = 5, threads = 0;
+  std::string json_path = "boundary_bench.json";
+  fs::path mesh_dir = fs::path(RIME_SHARED_DIR) / "meshes";
+  for (int i = 1; i + 1 < argc; i += 2) {
+    if (!std::strcmp(argv[i], "--repeats")) repeats = std::max(1, std::atoi(argv[i + 1]));
+    else if (!std::strcmp(argv[i], "--threads")) threads = std::atoi(argv[i + 1]);
+    else if (!std::strcmp(argv[i], "--json")) json_path = argv[i + 1];
+    else if (!std::strcmp(argv[i], "--mesh-dir")) mesh_dir = argv[i + 1];
+  }
+  if (threads > 0) exec::SetCpuThreads(threads);
+  if (std::getenv("RIME_BENCH_VERBOSE")) log::SetLevel(log::Level::kDebug);
+
+  std::vector<Case> cases;
+  const fs::path bunny = mesh_dir / "stanford-bunny.obj";
+  if (fs::exists(bunny)) {
+    cases.push_back({"bunny 0.5 m, d_p 5 mm", [bunny] {
+                       io::TriMesh m = io::ImportMesh(bunny);
+                       io::Transform t;  // the bunny is about 0.16 m and y-up: scale its largest extent to 0.5 m
+                       t.up_axis = "y";
+                       t.scale = Vec3d::Splat(0.5 / 0.155);
+                       boundary::ApplyTransform(m, t);
+                       return m;
+                     },
+                     0.005});
+  } else {
+    fmt::print("bunny skipped: {} not found\n", bunny.string());
+  }
+  // Torus with R = 0.5 m, r = 0.15 m tessellated to about 1 million triangles (edges ~2.4 mm).
+  cases.push_back({"torus 1M triangles, d_p 5 mm", [] { return boundary::MakeTorus(0.5, 0.15, 0.00243); }, 0.005});
+  cases.push_back({"torus 1M triangles, d_p 2 cm", [] { return boundary::MakeTorus(0.5, 0.15, 0.00243); }, 0.02});
+  cases.push_back({"box 4x3x1.5 m tank, d_p 1 cm", [] { return boundary::MakeBox(Vec3d(4, 3, 1.5), true, 0.005); }, 0.01});
+
+  fmt::print("rime-boundary sampling + Akinci volumes, CPU, {} threads, median of {} runs (h = d_p, d_b = d_p/2)\n",
+             exec::CpuThreads(), repeats);
+  fmt::print("| {:<28} | {:>9} | {:>9} | {:>8} | {:>8} | {:>8} | {:>8} | {:>9} |\n", "case", "triangles", "particles", "load s",
+             "sample s", "volume s", "total s", "M part/s");
+  fmt::print("|{:-<30}|{:->11}|{:->11}|{:->10}|{:->10}|{:->10}|{:->10}|{:->11}|\n", "", "", "", "", "", "", "", "");
+  nlohmann::json results = nlohmann::json::array();
+  for (const Case& c : cases) results.push_back(RunCase(c, repeats));
+  fmt::print("(load = mesh file import or procedural tessellation, not included in M part/s)\n");
+  std::ofstream(json_path) << nlohmann::json{{"benchmark", "boundary"}, {"threads", exec::CpuThreads()}, {"repeats", repeats},
+                                             {"results", results}}
+                                  .dump(2)
+                           << "\n";
+  fmt::print("wrote {}\n", json_path);
+  return 0;
+}
