@@ -6,6 +6,11 @@
 #include <filesystem>
 #include <fstream>
 
+#include <assimp/Exporter.hpp>
+#include <assimp/Importer.hpp>
+#include <assimp/postprocess.h>
+#include <assimp/scene.h>
+
 #include "rime/boundary/object.h"
 #include "rime/boundary/shapes.h"
 #include "rime/core/error.h"
@@ -100,7 +105,17 @@ TEST(BoundaryObject, MeshFileFormatsThroughAssimp) {
   BoundarySettings settings;
   settings.particle_spacing = 0.2;  // d_b = 0.1
   std::size_t expected = 0;
-  for (const char* name : {"cube.obj", "cube.ply", "cube.stl"}) {
+  // glTF, GLB, FBX and binary STL/PLY written by assimp's exporter from the OBJ.
+  {
+    Assimp::Importer importer;
+    const aiScene* scene = importer.ReadFile((dir / "cube.obj").string(), aiProcess_Triangulate);
+    ASSERT_NE(scene, nullptr) << importer.GetErrorString();
+    Assimp::Exporter exporter;
+    for (const auto& [format, name] : {std::pair{"gltf2", "cube.gltf"}, std::pair{"glb2", "cube.glb"}, std::pair{"fbxa", "cube.fbx"},
+                                       std::pair{"stlb", "cube_binary.stl"}, std::pair{"plyb", "cube_binary.ply"}})
+      ASSERT_EQ(exporter.Export(scene, format, (dir / name).string()), AI_SUCCESS) << format << ": " << exporter.GetErrorString();
+  }
+  for (const char* name : {"cube.obj", "cube.ply", "cube.stl", "cube.gltf", "cube.glb", "cube.fbx", "cube_binary.stl", "cube_binary.ply"}) {
     SCOPED_TRACE(name);
     const BoundaryObject o = BuildBoundaryObject(MeshObject(dir / name), 0, dir / name, settings);
     EXPECT_EQ(o.stats.triangles, 12u);
