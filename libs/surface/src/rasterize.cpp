@@ -1,0 +1,619 @@
+// Sparse, parallel rasterization of the surface field into an OpenVDB narrow-band level set.
+//
+// Particles are binned by the 8³ OpenVDB leaf their centre lies in. Every leaf that some particle
+// can reach is then filled independently (no locks, no atomics): it gathers the particles binned in
+// the (2K+1)³ surrounding leaves and evaluates their ellipsoid distance (or kernel sum) on its own
+// 512-voxel buffer. Only leaves near particles exist, so memory follows the particles, not the
+// bounding box. The union of small ellipsoids is a distance only outside and near the surface;
+// interior depth comes from erosions of the inside mask (chessboard layers), and voxels deeper
+// than the band become inactive −background tiles: a proper narrow band on both sides.
+#include <openvdb/openvdb.h>
+#include <openvdb/tools/LevelSetFilter.h>
+#include <openvdb/tools/LevelSetUtil.h>
+#include <openvdb/tools/Morphology.h>
+#include <openvdb/tools/Prune.h>
+#include <openvdb/tree/LeafManager.h>
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/parallel_sort.h>
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <mutex>
+#include <unordered_map>
+
+#include "grids.h"
+#include "rime/core/error.h"
+#include "rime/exec/parallel.h"
+
+namespace rime::surface {
+
+std::vector<Vec3f> InterpolateVelocities(const ParticleSet& particles, const std::vector<Vec3f>& points);
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double Seconds(Clock::time_point since) { return std::chrono::duration<double>(Clock::now() - since).count(); }
+
+constexpr int kLeafDim = 8;
+constexpr std::int64_t kKeyBias = 1 << 20;
+
+std::uint64_t LeafKey(std::int64_t lx, std::int64_t ly, std::int64_t lz) {
+  return std::uint64_t(lx + kKeyBias) << 42 | std::uint64_t(ly + kKeyBias) << 21 | std::uint64_t(lz + kKeyBias);
+}
+void KeyToLeaf(std::uint64_t key, std::int64_t& lx, std::int64_t& ly, std::int64_t& lz) {
+  const std::uint64_t mask = (1ULL << 21) - 1;
+  lx = std::int64_t(key >> 42 & mask) - kKeyBias;
+  ly = std::int64_t(key >> 21 & mask) - kKeyBias;
+  lz = std::int64_t(key & mask) - kKeyBias;
+}
+std::int64_t FloorDiv(double v) { return std::int64_t(std::floor(v / kLeafDim)); }
+
+/// Which leaves exist and which particles each one must visit.
+struct Plan {
+  double dx = 0;
+  openvdb::Coord offset;            // global index of local voxel (0,0,0); a multiple of 8
+  std::vector<Vec3f> u;             // particle centres in local voxel coordinates
+  std::vector<float> reach;         // voxels: beyond this a particle cannot change a voxel
+  std::vector<std::uint32_t> sorted;         // particle indices grouped by leaf
+  std::vector<std::uint32_t> bin_start;      // per occupied leaf, into sorted (size bins + 1)
+  std::unordered_map<std::uint64_t, std::uint32_t> bin_of_key;
+  std::vector<std::uint64_t> targets;        // leaves to evaluate
+  int K = 1;                                 // neighbourhood radius in leaves
+};
+
+Plan MakePlan(const std::vector<Vec3d>& world_centers, const std::vector<float>& reach, double dx) {
+  Plan plan;
+  plan.dx = dx;
+  const std::size_t n = world_centers.size();
+  Vec3d lo = world_centers[0], hi = lo;
+  for (const Vec3d& p : world_centers) lo = Min(lo, p), hi = Max(hi, p);
+  float max_reach = 0;
+  for (float r : reach) max_reach = std::max(max_reach, r);
+  const double cells = std::max({hi.x - lo.x, hi.y - lo.y, hi.z - lo.z}) / dx + 2 * max_reach;
+  if (!(cells < double(kKeyBias) * kLeafDim / 2) || !std::isfinite(cells))
+    throw InputError(fmt::format("voxel size {:.4g} m is too small for a particle cloud {:.4g} m wide ({:.3g} voxels)", dx,
+                                 std::max({hi.x - lo.x, hi.y - lo.y, hi.z - lo.z}), cells),
+                     "voxel size");
+  if (max_reach > 100)
+    throw InputError(fmt::format("voxel size {:.4g} m is too small for the particle size: a particle would reach {:.0f} "
+                                 "voxels (at most 100; use a coarser voxel size)",
+                                 dx, max_reach),
+                     "voxel size");
+  const auto leaf_floor = [](double v) { return std::floor(v / kLeafDim) * kLeafDim; };
+  plan.offset = openvdb::Coord(int(leaf_floor(std::floor(lo.x / dx))), int(leaf_floor(std::floor(lo.y / dx))),
+                               int(leaf_floor(std::floor(lo.z / dx))));
+  const Vec3d base(plan.offset.x() * dx, plan.offset.y() * dx, plan.offset.z() * dx);
+  plan.u.resize(n);
+  plan.reach = reach;
+  std::vector<std::pair<std::uint64_t, std::uint32_t>> keyed(n);
+  exec::cpu::ParallelFor(Index(n), [&](Index i) {
+    const Vec3d u = (world_centers[i] - base) / dx;
+    plan.u[i] = Vec3f(u);
+    keyed[i] = {LeafKey(FloorDiv(u.x), FloorDiv(u.y), FloorDiv(u.z)), std::uint32_t(i)};
+  });
+  tbb::parallel_sort(keyed.begin(), keyed.end());
+  plan.sorted.resize(n);
+  std::vector<std::uint64_t> bins;
+  for (std::size_t s = 0; s < n; ++s) {
+    plan.sorted[s] = keyed[s].second;
+    if (s == 0 || keyed[s].first != keyed[s - 1].first) {
+      plan.bin_of_key.emplace(keyed[s].first, std::uint32_t(bins.size()));
+      bins.push_back(keyed[s].first);
+      plan.bin_start.push_back(std::uint32_t(s));
+    }
+  }
+  plan.bin_start.push_back(std::uint32_t(n));
+  plan.K = std::max(1, int(std::ceil(max_reach / kLeafDim)));
+  // Leaves some particle reaches: each particle's box, in leaves.
+  std::vector<std::uint64_t> targets;
+  targets.reserve(bins.size() * 8);
+  for (std::size_t b = 0; b < bins.size(); ++b) {
+    float r = 0;
+    Vec3f blo = plan.u[plan.sorted[plan.bin_start[b]]], bhi = blo;
+    for (std::uint32_t s = plan.bin_start[b]; s < plan.bin_start[b + 1]; ++s) {
+      const std::uint32_t i = plan.sorted[s];
+      r = std::max(r, plan.reach[i]);
+      blo = Min(blo, plan.u[i]), bhi = Max(bhi, plan.u[i]);
+    }
+    for (std::int64_t lx = FloorDiv(blo.x - r); lx <= FloorDiv(bhi.x + r); ++lx)
+      for (std::int64_t ly = FloorDiv(blo.y - r); ly <= FloorDiv(bhi.y + r); ++ly)
+        for (std::int64_t lz = FloorDiv(blo.z - r); lz <= FloorDiv(bhi.z + r); ++lz) targets.push_back(LeafKey(lx, ly, lz));
+  }
+  tbb::parallel_sort(targets.begin(), targets.end());
+  targets.erase(std::unique(targets.begin(), targets.end()), targets.end());
+  plan.targets = std::move(targets);
+  return plan;
+}
+
+/// Everything the per-leaf evaluation reads, in local voxel units.
+struct FieldInputs {
+  Field field = Field::kEllipsoids;
+  float rho = 0;                     // ellipsoid level r_iso / Δx
+  float band = 3;                    // half band, voxels
+  const std::array<float, 6>* D = nullptr;  // per particle (null: isotropic)
+  const float* min_stretch = nullptr;
+  float inv_h = 0;                   // kernel sum: 1 / h in voxels
+  float volume = 0;                  // kernel sum: V / Δx³
+  float iso = 0.5f;
+  bool track_nearest = false;
+};
+
+struct SymMat {
+  float xx, yy, zz, xy, xz, yz;
+};
+SymMat Square(const SymMat& d) {
+  return {d.xx * d.xx + d.xy * d.xy + d.xz * d.xz, d.xy * d.xy + d.yy * d.yy + d.yz * d.yz,
+          d.xz * d.xz + d.yz * d.yz + d.zz * d.zz, d.xx * d.xy + d.xy * d.yy + d.xz * d.yz,
+          d.xx * d.xz + d.xy * d.yz + d.xz * d.zz, d.xy * d.xz + d.yy * d.yz + d.yz * d.zz};
+}
+
+struct LeafBuffers {
+  float phi[512];
+  float sum[512];
+  float grad[3][512];
+  std::int32_t nearest[512];
+  float best[512];
+};
+
+// Ellipsoid distance (Taubin's first-order distance to ‖D r‖ = ρ, exact for spheres) of particle i
+// on the voxels of its box inside the leaf; keeps the minimum (union, Eq. 41).
+void SplatEllipsoid(const FieldInputs& in, std::uint32_t i, const Vec3f& c, const int lo[3], const int hi[3],
+                    LeafBuffers& buf) {
+  SymMat d{1, 1, 1, 0, 0, 0};
+  if (in.D) {
+    const auto& a = in.D[i];
+    d = {a[0], a[1], a[2], a[3], a[4], a[5]};
+  }
+  const SymMat d2 = Square(d);
+  const float rho = in.rho;
+  const float center_value = -rho * (in.min_stretch ? in.min_stretch[i] : 1.0f);
+  for (int x = lo[0]; x <= hi[0]; ++x) {
+    const float rx = float(x) - c.x;
+    for (int y = lo[1]; y <= hi[1]; ++y) {
+      const float ry = float(y) - c.y;
+      // D r and D² r are affine in r_z along the row.
+      const float ax = d.xx * rx + d.xy * ry, ay = d.xy * rx + d.yy * ry, az = d.xz * rx + d.yz * ry;
+      const float bx = d2.xx * rx + d2.xy * ry, by = d2.xy * rx + d2.yy * ry, bz = d2.xz * rx + d2.yz * ry;
+      const int row = x * 64 + y * 8;
+      for (int z = lo[2]; z <= hi[2]; ++z) {
+        const float rz = float(z) - c.z;
+        const float px = ax + d.xz * rz, py = ay + d.yz * rz, pz = az + d.zz * rz;
+        const float qx = bx + d2.xz * rz, qy = by + d2.yz * rz, qz = bz + d2.zz * rz;
+        const float q2 = px * px + py * py + pz * pz;
+        const float p2 = qx * qx + qy * qy + qz * qz;
+        const float q = std::sqrt(q2);
+        const float phi = p2 > 1e-12f ? (q - rho) * q / std::sqrt(p2) : center_value;
+        float& slot = buf.phi[row + z];
+        if (phi < slot) {
+          slot = phi;
+          if (in.track_nearest) buf.nearest[row + z] = std::int32_t(i);
+        }
+      }
+    }
+  }
+}
+
+// Yu & Turk kernel sum Σ V W_A(x − x̄_i, G_i) and its gradient.
+void SplatKernel(const FieldInputs& in, std::uint32_t i, const Vec3f& c, const int lo[3], const int hi[3],
+                 LeafBuffers& buf) {
+  SymMat g{in.inv_h, in.inv_h, in.inv_h, 0, 0, 0};
+  if (in.D) {
+    const auto& a = in.D[i];
+    g = {a[0] * in.inv_h, a[1] * in.inv_h, a[2] * in.inv_h, a[3] * in.inv_h, a[4] * in.inv_h, a[5] * in.inv_h};
+  }
+  const SymMat g2 = Square(g);
+  const float det = g.xx * (g.yy * g.zz - g.yz * g.yz) - g.xy * (g.xy * g.zz - g.yz * g.xz) + g.xz * (g.xy * g.yz - g.yy * g.xz);
+  const float scale = in.volume * 0.07957747154594767f * det;  // V σ3 det(G)
+  for (int x = lo[0]; x <= hi[0]; ++x) {
+    const float rx = float(x) - c.x;
+    for (int y = lo[1]; y <= hi[1]; ++y) {
+      const float ry = float(y) - c.y;
+      const int row = x * 64 + y * 8;
+      for (int z = lo[2]; z <= hi[2]; ++z) {
+        const float rz = float(z) - c.z;
+        const float px = g.xx * rx + g.xy * ry + g.xz * rz, py = g.xy * rx + g.yy * ry + g.yz * rz,
+                    pz = g.xz * rx + g.yz * ry + g.zz * rz;
+        const float q = std::sqrt(px * px + py * py + pz * pz);
+        if (q >= 2.0f) continue;
+        const float w = scale * CubicSpline<float>::Shape(q);
+        const int v = row + z;
+        buf.sum[v] += w;
+        if (q > 1e-6f) {
+          // ∇_x W_A = V σ3 det(G) B'(q) G (G r) / q (G symmetric).
+          const float f = scale * CubicSpline<float>::ShapeDerivative(q) / q;
+          buf.grad[0][v] += f * (g2.xx * rx + g2.xy * ry + g2.xz * rz);
+          buf.grad[1][v] += f * (g2.xy * rx + g2.yy * ry + g2.yz * rz);
+          buf.grad[2][v] += f * (g2.xz * rx + g2.yz * ry + g2.zz * rz);
+        }
+        if (in.track_nearest && w > buf.best[v]) buf.best[v] = w, buf.nearest[v] = std::int32_t(i);
+      }
+    }
+  }
+}
+
+struct RasterOutput {
+  openvdb::FloatTree::Ptr surface;
+  openvdb::MaskTree::Ptr inside;
+  openvdb::MaskTree::Ptr shallow_outside;  // 0 <= φ < 1 voxel: where enclosed voids can be
+  openvdb::MaskTree::Ptr far_outside;      // φ >= 1 voxel inside allocated leaves: seeds of the exterior
+  openvdb::Vec3STree::Ptr velocity;
+};
+
+RasterOutput Rasterize(const Plan& plan, const FieldInputs& in, const std::vector<Vec3f>* velocities) {
+  const float band = in.band;
+  const float dx = float(plan.dx);
+  const float background = band * dx;
+  const std::size_t count = plan.targets.size();
+  std::vector<openvdb::FloatTree::LeafNodeType*> leaves(count, nullptr);
+  std::vector<openvdb::MaskTree::LeafNodeType*> inside_leaves(count, nullptr);
+  std::vector<openvdb::MaskTree::LeafNodeType*> shallow_leaves(count, nullptr), far_leaves(count, nullptr);
+  std::vector<openvdb::Vec3STree::LeafNodeType*> velocity_leaves(velocities ? count : 0, nullptr);
+  const int K = plan.K;
+
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 4), [&](const tbb::blocked_range<std::size_t>& range) {
+    std::unique_ptr<LeafBuffers> buf(new LeafBuffers);
+    for (std::size_t t = range.begin(); t != range.end(); ++t) {
+      std::int64_t lx, ly, lz;
+      KeyToLeaf(plan.targets[t], lx, ly, lz);
+      const Vec3f leaf_origin(float(lx * kLeafDim), float(ly * kLeafDim), float(lz * kLeafDim));
+      const bool sum = in.field == Field::kKernelSum;
+      if (sum) {
+        std::fill(std::begin(buf->sum), std::end(buf->sum), 0.0f);
+        for (auto& g : buf->grad) std::fill(std::begin(g), std::end(g), 0.0f);
+        std::fill(std::begin(buf->best), std::end(buf->best), 0.0f);
+      } else {
+        std::fill(std::begin(buf->phi), std::end(buf->phi), band);
+      }
+      if (in.track_nearest) std::fill(std::begin(buf->nearest), std::end(buf->nearest), -1);
+      bool touched = false;
+      for (int ox = -K; ox <= K; ++ox)
+        for (int oy = -K; oy <= K; ++oy)
+          for (int oz = -K; oz <= K; ++oz) {
+            const auto it = plan.bin_of_key.find(LeafKey(lx + ox, ly + oy, lz + oz));
+            if (it == plan.bin_of_key.end()) continue;
+            for (std::uint32_t s = plan.bin_start[it->second]; s < plan.bin_start[it->second + 1]; ++s) {
+              const std::uint32_t i = plan.sorted[s];
+              const Vec3f c = plan.u[i] - leaf_origin;
+              const float r = plan.reach[i];
+              int lo[3], hi[3];
+              bool empty = false;
+              for (int a = 0; a < 3; ++a) {
+                lo[a] = std::max(0, int(std::ceil(c[a] - r)));
+                hi[a] = std::min(kLeafDim - 1, int(std::floor(c[a] + r)));
+                empty = empty || lo[a] > hi[a];
+              }
+              if (empty) continue;
+              touched = true;
+              if (sum) SplatKernel(in, i, c, lo, hi, *buf);
+              else SplatEllipsoid(in, i, c, lo, hi, *buf);
+            }
+          }
+      if (!touched) continue;
+      if (in.field == Field::kKernelSum) {
+        // Distance-like field from the sum: (iso − f) / ‖∇f‖ (first-order distance to f = iso).
+        for (int v = 0; v < 512; ++v) {
+          const float f = buf->sum[v];
+          const float g = std::sqrt(buf->grad[0][v] * buf->grad[0][v] + buf->grad[1][v] * buf->grad[1][v] +
+                                    buf->grad[2][v] * buf->grad[2][v]);
+          const float diff = in.iso - f;
+          buf->phi[v] = std::fabs(diff) < band * g ? diff / g : (diff > 0 ? band : -band);
+        }
+      }
+      bool any = false;
+      for (int v = 0; v < 512 && !any; ++v) any = buf->phi[v] < band;
+      if (!any) continue;
+      const openvdb::Coord origin(plan.offset.x() + int(lx * kLeafDim), plan.offset.y() + int(ly * kLeafDim),
+                                  plan.offset.z() + int(lz * kLeafDim));
+      auto* leaf = new openvdb::FloatTree::LeafNodeType(origin, background, false);
+      auto* inside = new openvdb::MaskTree::LeafNodeType(origin, false);
+      auto* shallow = new openvdb::MaskTree::LeafNodeType(origin, false);
+      auto* far = new openvdb::MaskTree::LeafNodeType(origin, false);
+      openvdb::Vec3STree::LeafNodeType* vel = nullptr;
+      if (velocities) vel = new openvdb::Vec3STree::LeafNodeType(origin, openvdb::Vec3s(0, 0, 0), false);
+      for (int v = 0; v < 512; ++v) {
+        const float phi = std::max(buf->phi[v], -band);
+        if (phi >= 1.0f) far->setValueOn(v);
+        else if (phi >= 0.0f) shallow->setValueOn(v);
+        if (phi >= band) continue;  // stays inactive background
+        leaf->setValueOn(v, phi * dx);
+        if (phi < 0) inside->setValueOn(v);
+        if (vel && buf->nearest[v] >= 0) {
+          const Vec3f& p = (*velocities)[buf->nearest[v]];
+          vel->setValueOn(v, openvdb::Vec3s(p.x, p.y, p.z));
+        }
+      }
+      leaves[t] = leaf;
+      inside_leaves[t] = inside;
+      shallow_leaves[t] = shallow;
+      far_leaves[t] = far;
+      if (vel) velocity_leaves[t] = vel;
+    }
+  });
+
+  RasterOutput out;
+  out.surface = std::make_shared<openvdb::FloatTree>(background);
+  out.inside = std::make_shared<openvdb::MaskTree>(false);
+  out.shallow_outside = std::make_shared<openvdb::MaskTree>(false);
+  out.far_outside = std::make_shared<openvdb::MaskTree>(false);
+  if (velocities) out.velocity = std::make_shared<openvdb::Vec3STree>(openvdb::Vec3s(0, 0, 0));
+  for (std::size_t t = 0; t < count; ++t) {
+    if (!leaves[t]) continue;
+    out.surface->addLeaf(leaves[t]);
+    out.inside->addLeaf(inside_leaves[t]);
+    out.shallow_outside->addLeaf(shallow_leaves[t]);
+    out.far_outside->addLeaf(far_leaves[t]);
+    if (velocities) out.velocity->addLeaf(velocity_leaves[t]);
+  }
+  return out;
+}
+
+// Fills enclosed voids: shallow outside voxels (0 <= φ < 1 voxel) that no face-connected path
+// through shallow voxels links to the far outside. A union of r_iso = 0.75 d_p spheres leaves
+// such pockets at cubic cell centres (half diagonal 0.87 d_p); they are not surface. Returns the
+// number of voxels filled.
+std::uint64_t FillEnclosedVoids(openvdb::FloatTree& tree, openvdb::MaskTree& inside, const openvdb::MaskTree& shallow,
+                                const openvdb::MaskTree& far, float dx) {
+  openvdb::MaskTree reached(far);
+  std::uint64_t previous = reached.activeVoxelCount();
+  openvdb::MaskTree outside(shallow);
+  outside.topologyUnion(far);
+  for (int iteration = 0; iteration < 256; ++iteration) {
+    openvdb::tools::dilateActiveValues(reached, 1, openvdb::tools::NN_FACE, openvdb::tools::IGNORE_TILES);
+    reached.topologyIntersection(outside);
+    const std::uint64_t now = reached.activeVoxelCount();
+    if (now == previous) break;
+    previous = now;
+  }
+  openvdb::MaskTree voids(shallow);
+  voids.topologyDifference(reached);
+  const std::uint64_t filled = voids.activeVoxelCount();
+  if (filled == 0) return 0;
+  openvdb::tree::ValueAccessor<openvdb::FloatTree> acc(tree);
+  for (auto it = voids.cbeginLeaf(); it; ++it) {
+    auto* leaf = acc.probeLeaf(it->origin());
+    if (!leaf) continue;
+    for (auto v = it->cbeginValueOn(); v; ++v) leaf->setValueOn(v.pos(), -0.5f * dx);
+  }
+  inside.topologyUnion(voids);
+  return filled;
+}
+
+// Interior depth from chessboard erosions of the inside mask: a voxel that survives k erosions is
+// at least k voxels from the nearest outside voxel. Deeper than the band: inactive −background.
+void BuildInteriorBand(openvdb::FloatTree& tree, const openvdb::MaskTree& inside, float band_voxels, float dx) {
+  const int layers = int(std::ceil(band_voxels));
+  std::vector<openvdb::MaskTree> eroded;
+  openvdb::MaskTree current(inside);
+  for (int k = 1; k <= layers; ++k) {
+    openvdb::tools::erodeActiveValues(current, 1, openvdb::tools::NN_FACE_EDGE_VERTEX, openvdb::tools::IGNORE_TILES);
+    eroded.push_back(current);
+  }
+  const float background = band_voxels * dx;
+  openvdb::tree::LeafManager<openvdb::FloatTree> manager(tree);
+  manager.foreach([&](openvdb::FloatTree::LeafNodeType& leaf, std::size_t) {
+    for (int k = 1; k <= layers; ++k) {
+      const auto* mask = eroded[k - 1].probeConstLeaf(leaf.origin());
+      if (!mask) break;
+      for (auto it = mask->cbeginValueOn(); it; ++it) {
+        const openvdb::Index v = it.pos();
+        if (k == layers) {
+          leaf.setValueOff(v, -background);
+        } else {
+          leaf.setValueOnly(v, std::min(leaf.getValue(v), -float(k) * dx));
+        }
+      }
+    }
+  });
+}
+
+}  // namespace
+
+openvdb::FloatGrid::Ptr EmptyLevelSet(double voxel_size, double half_band) {
+  InitializeOpenVdb();
+  auto grid = openvdb::FloatGrid::create(float(half_band * voxel_size));
+  grid->setTransform(openvdb::math::Transform::createLinearTransform(voxel_size));
+  grid->setGridClass(openvdb::GRID_LEVEL_SET);
+  grid->setName("surface");
+  return grid;
+}
+
+void InitializeOpenVdb() {
+  static std::once_flag once;
+  std::call_once(once, [] { openvdb::initialize(); });
+}
+
+namespace {
+
+void CheckSettings(const ParticleSet& particles, const Settings& s) {
+  const auto fail = [](const std::string& what, const std::string& field) { throw InputError(what, field); };
+  if (!(particles.spacing > 0)) fail("particle spacing must be positive", "spacing");
+  if (s.voxel_size < 0 || !std::isfinite(s.voxel_size)) fail("voxel size must be positive (m)", "voxel_size");
+  if (!(s.voxel_ratio > 0)) fail("voxel ratio must be positive", "voxel_ratio");
+  if (s.resolution < 0 || s.resolution == 1) fail("resolution must be at least 2 (or 0 = off)", "resolution");
+  if (!(s.r_iso > 0) || s.r_iso > 4) fail("r_iso must be in (0, 4] particle spacings", "r_iso");
+  if (!(s.lambda >= 0 && s.lambda <= 1)) fail("lambda must be in [0, 1]", "lambda");
+  if (!(s.iso > 0)) fail("iso value must be positive", "iso");
+  if (!(s.half_band >= 3)) fail("narrow band half width must be at least 3 voxels", "half_band");
+  if (s.smooth_iterations < 0) fail("smoothing iterations must be >= 0", "smooth");
+  const auto& a = s.anisotropy;
+  if (!(a.k_r >= 1)) fail("k_r must be >= 1", "k_r");
+  if (!(a.k_s >= 0)) fail("k_s must be >= 0 (0 = automatic)", "k_s");
+  if (!(a.k_n > 0)) fail("k_n must be positive", "k_n");
+  if (a.n_eps < 0) fail("N_eps must be >= 0", "n_eps");
+  if (!(a.s_min > 0 && a.s_min <= a.s_max)) fail("need 0 < s_min <= s_max", "s_min");
+}
+
+std::vector<float> ReachVoxels(const ParticleSet& particles, const Settings& s, const PreparedParticles* prepared,
+                               double dx, float rho, float band, float h_vox) {
+  const std::size_t n = particles.size();
+  std::vector<float> reach(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    const float max_s = prepared && !prepared->max_stretch.empty() ? prepared->max_stretch[i] : float(s.anisotropy.s_max);
+    if (s.field == Field::kKernelSum) {
+      reach[i] = 2 * h_vox * (s.field == Field::kIsotropic ? 1.0f : max_s);
+    } else {
+      const float level = rho * (s.field == Field::kIsotropic ? 1.0f : max_s);
+      // A fully surrounded particle cannot be the nearest ellipsoid to voxels far outside it.
+      const bool interior = prepared && !prepared->interior.empty() && prepared->interior[i];
+      reach[i] = level + (interior ? std::min(band, 1.75f) : band);
+    }
+  }
+  return reach;
+}
+
+}  // namespace
+
+std::uint64_t EstimateMemoryBytes(const ParticleSet& particles, const Settings& settings) {
+  CheckSettings(particles, settings);
+  const std::size_t n = particles.size();
+  if (n == 0) return 0;
+  const double dx = VoxelSize(particles, settings);
+  const double h = particles.smoothing_length > 0 ? particles.smoothing_length : particles.spacing;
+  const std::vector<float> reach =
+      ReachVoxels(particles, settings, nullptr, dx, float(settings.r_iso * particles.spacing / dx), float(settings.half_band),
+                  float(h / dx));
+  const Plan plan = MakePlan(particles.positions, reach, dx);
+  // Per leaf: float values + masks (surface, inside, erosion copies) + node overhead; the mesh is
+  // bounded by the surface leaves (about 2 triangles and one vertex per surface voxel).
+  const double leaf_bytes = 512 * 4 + 64 * (4 + std::ceil(settings.half_band)) + 96 +
+                            (settings.velocity_grid ? 512 * 12 : 0) + (settings.density_grid ? 512 * 4 : 0);
+  const double particle_bytes = 24 + 12 + 24 + 12 + 8 + 3 + 32 + 16;  // input, centres, D, velocity, stretches, grid, plan
+  // Internal nodes: 16³-child nodes cover 128³ voxels (~50 kB each), 32³-child nodes 4096³ (~400 kB).
+  std::vector<std::uint64_t> upper1, upper2;
+  for (std::uint64_t key : plan.targets) {
+    std::int64_t lx, ly, lz;
+    KeyToLeaf(key, lx, ly, lz);
+    upper1.push_back(LeafKey(lx >> 4, ly >> 4, lz >> 4));
+    upper2.push_back(LeafKey(lx >> 9, ly >> 9, lz >> 9));
+  }
+  for (auto* v : {&upper1, &upper2}) {
+    std::sort(v->begin(), v->end());
+    v->erase(std::unique(v->begin(), v->end()), v->end());
+  }
+  const double node_bytes = upper1.size() * 4096 * 12.0 + upper2.size() * 32768 * 12.0;
+  return std::uint64_t(plan.targets.size() * leaf_bytes * 1.5 + node_bytes * 2 + n * particle_bytes);
+}
+
+Result Reconstruct(const ParticleSet& particles, const Settings& settings) {
+  CheckSettings(particles, settings);
+  InitializeOpenVdb();
+  Result result;
+  result.grids = std::make_shared<Grids>();
+  Stats& stats = result.stats;
+  stats.particles = particles.size();
+  const double dx = VoxelSize(particles, settings);
+  stats.voxel_size = dx;
+  const double particle_reach = std::max(settings.r_iso * particles.spacing,
+                                         2 * (particles.smoothing_length > 0 ? particles.smoothing_length : particles.spacing));
+  if (!(particle_reach / dx <= 100))
+    throw InputError(fmt::format("voxel size {:.3g} m is too small for particle spacing {:.3g} m: one particle would span "
+                                 "{:.0f} voxels (at most 100)",
+                                 dx, particles.spacing, particle_reach / dx),
+                     "voxel_size");
+  result.grids->surface = EmptyLevelSet(dx, settings.half_band);
+  if (particles.size() == 0) return result;
+
+  auto t0 = Clock::now();
+  const PreparedParticles prepared = Prepare(particles, settings, dx);
+  stats.seconds_prepare = Seconds(t0);
+
+  t0 = Clock::now();
+  const double h = particles.smoothing_length > 0 ? particles.smoothing_length : particles.spacing;
+  const float rho = float(std::max(settings.r_iso * particles.spacing, 0.5 * dx) / dx);
+  const float band = float(settings.half_band);
+  const std::vector<float> reach = ReachVoxels(particles, settings, &prepared, dx, rho, band, float(h / dx));
+  std::vector<Vec3d> world(particles.size());
+  exec::cpu::ParallelFor(Index(particles.size()), [&](Index i) { world[i] = prepared.origin + Vec3d(prepared.centers[i]); });
+  const Plan plan = MakePlan(world, reach, dx);
+  world = {};
+
+  FieldInputs in;
+  in.field = settings.field;
+  in.rho = rho;
+  in.band = band;
+  in.D = prepared.D.empty() ? nullptr : prepared.D.data();
+  in.min_stretch = prepared.min_stretch.data();
+  in.inv_h = float(dx / h);
+  const double volume = particles.particle_volume > 0 ? particles.particle_volume : std::pow(particles.spacing, 3);
+  in.volume = float(volume / (dx * dx * dx));
+  in.iso = float(settings.iso);
+  const bool want_velocity = settings.velocity_grid && !particles.velocities.empty();
+  in.track_nearest = want_velocity;
+  RasterOutput raster = Rasterize(plan, in, want_velocity ? &particles.velocities : nullptr);
+  if (!settings.keep_voids)
+    stats.filled_void_voxels = FillEnclosedVoids(*raster.surface, *raster.inside, *raster.shallow_outside, *raster.far_outside, float(dx));
+  raster.shallow_outside.reset();
+  raster.far_outside.reset();
+  BuildInteriorBand(*raster.surface, *raster.inside, band, float(dx));
+  raster.inside.reset();
+  openvdb::tools::pruneLevelSet(*raster.surface);
+  auto& grid = result.grids->surface;
+  grid->setTree(raster.surface);
+  stats.seconds_rasterize = Seconds(t0);
+
+  t0 = Clock::now();
+  if (settings.smooth_iterations > 0) {
+    openvdb::tools::LevelSetFilter<openvdb::FloatGrid> filter(*grid);
+    for (int k = 0; k < settings.smooth_iterations; ++k) filter.meanCurvature();
+  }
+  if (settings.velocity_grid) {
+    auto vel = openvdb::Vec3SGrid::create(openvdb::Vec3s(0, 0, 0));
+    if (raster.velocity) {
+      raster.velocity->topologyIntersection(grid->tree());
+      openvdb::tools::prune(*raster.velocity);
+      vel->setTree(raster.velocity);
+    }
+    vel->setTransform(grid->transform().copy());
+    vel->setName("vel");
+    vel->setVectorType(openvdb::VEC_CONTRAVARIANT_RELATIVE);
+    result.grids->velocity = vel;
+  }
+  if (settings.density_grid) {
+    auto density = grid->deepCopy();
+    openvdb::tools::sdfToFogVolume(*density);
+    density->setName("density");
+    result.grids->density = density;
+  }
+  stats.seconds_filter = Seconds(t0);
+  stats.active_voxels = grid->activeVoxelCount();
+  stats.leaves = grid->tree().leafCount();
+  stats.grid_bytes = grid->memUsage();
+
+  if (settings.mesh) {
+    t0 = Clock::now();
+    stats.removed_void_shells = ExtractMesh(*grid, settings.keep_voids, result.mesh);
+    if (settings.mesh_velocities) result.mesh.velocities = InterpolateVelocities(particles, result.mesh.positions);
+    stats.vertices = result.mesh.vertex_count();
+    stats.triangles = result.mesh.triangle_count();
+    stats.seconds_mesh = Seconds(t0);
+  }
+  return result;
+}
+
+std::vector<float> SampleSurface(const Result& result, const std::vector<Vec3d>& points) {
+  std::vector<float> out(points.size(), 0.0f);
+  if (!result.grids || !result.grids->surface) return out;
+  const auto& grid = *result.grids->surface;
+  auto acc = grid.getConstAccessor();
+  const auto& xform = grid.transform();
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    const openvdb::Vec3d ijk = xform.worldToIndex(openvdb::Vec3d(points[i].x, points[i].y, points[i].z));
+    // Trilinear interpolation by hand (keeps Interpolation.h out of this file).
+    const openvdb::Coord base(int(std::floor(ijk.x())), int(std::floor(ijk.y())), int(std::floor(ijk.z())));
+    const double fx = ijk.x() - base.x(), fy = ijk.y() - base.y(), fz = ijk.z() - base.z();
+    double v = 0;
+    for (int c = 0; c < 8; ++c) {
+      const int ox = c & 1, oy = c >> 1 & 1, oz = c >> 2 & 1;
+      const double w = (ox ? fx : 1 - fx) * (oy ? fy : 1 - fy) * (oz ? fz : 1 - fz);
+      v += w * acc.getValue(base.offsetBy(ox, oy, oz));
+    }
+    out[i] = float(v);
+  }
+  return out;
+}
+
+}  // namespace rime::surface
