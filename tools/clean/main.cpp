@@ -28,7 +28,9 @@ using namespace rime;
 namespace {
 
 struct Frame {
-  fs::path input, output;
+  fs::path input;
+  std::vector<fs::path> outputs;  // one mesh file, or .obj and .ply
+  fs::path report;                // per-frame quality report beside folder outputs ("" for one file)
   std::string stem;      // "ice" of ice.0012.obj
   std::int64_t number = -1;  // -1: no frame number in the name
 };
@@ -120,9 +122,12 @@ int main(int argc, char** argv) {
   app.add_option("MESH", inputs, "Input meshes (.obj/.ply), or folders of them; frame numbers are read from names like ice.0012.obj")
       ->required();
   app.add_option("-o,--output", output,
-                 "Output file (one input), or folder: ice.0012.obj -> FOLDER/ice_clean.0012.obj")
+                 "Output file (one input; its extension picks the format), or folder: ice.0012.obj -> "
+                 "FOLDER/ice_clean.0012.{obj,ply} plus the frame's quality report ice_clean.0012.json")
       ->required();
-  app.add_option("--format", format, "Output format (default: the input's extension)")->check(CLI::IsMember({"obj", "ply"}));
+  app.add_option("--format", format,
+                 "Folder output: obj, ply or both [both: OBJ for every DCC, PLY with per-vertex velocity for motion blur]")
+      ->check(CLI::IsMember({"obj", "ply", "both"}));
   app.add_option("--scene", scene_file, "Scene file whose [cleanup] section gives the defaults (options below override it)");
   app.add_option("--report", report_file, "Write every frame's quality report to this JSON file");
 
@@ -151,22 +156,22 @@ int main(int argc, char** argv) {
       ->check(CLI::PositiveNumber);
   g->add_option("--remesh-iterations", o.remesh_iterations, fmt::format("5. Remeshing iterations [{}]", d.remesh_iterations))
       ->check(CLI::Range(1, 100));
-  g->add_option("--smooth", o.smooth, "6. tangential (relaxation, keeps volume), angle, none [" + d.smooth + "]")
+  g->add_flag("--no-decimate", o.no_decimate, "6. Keep the face count");
+  g->add_option("--decimate-ratio", o.decimate_ratio, fmt::format("6. Keep this fraction of the faces [{}]", d.decimate_ratio))
+      ->check(CLI::Range(0.0, 1.0));
+  g->add_option("--decimate-faces", o.decimate_faces, "6. Target face count (overrides the ratio)")->check(CLI::PositiveNumber);
+  g->add_option("--decimate-max-error", o.decimate_max_error,
+                "6. Also stop when a collapse would cost more than this quadric error, m (0 = off) [0]")
+      ->check(CLI::NonNegativeNumber);
+  g->add_option("--smooth", o.smooth, "7. tangential (relaxation, keeps volume), angle, none [" + d.smooth + "]")
       ->check(CLI::IsMember({"tangential", "angle", "none"}));
-  g->add_option("--smooth-iterations", o.smooth_iterations, fmt::format("6. Smoothing iterations [{}]", d.smooth_iterations))
+  g->add_option("--smooth-iterations", o.smooth_iterations, fmt::format("7. Smoothing iterations [{}]", d.smooth_iterations))
       ->check(CLI::Range(0, 1000));
   g->add_option("--shape-smooth-iterations", o.shape_smooth_iterations,
-                "6. Mean-curvature-flow iterations, volume restored afterwards (0 = off) [0]")
+                "7. Mean-curvature-flow iterations, volume restored afterwards (0 = off) [0]")
       ->check(CLI::Range(0, 1000));
-  g->add_option("--shape-smooth-time", o.shape_smooth_time, fmt::format("6. Mean-curvature-flow time step [{}]", d.shape_smooth_time))
+  g->add_option("--shape-smooth-time", o.shape_smooth_time, fmt::format("7. Mean-curvature-flow time step [{}]", d.shape_smooth_time))
       ->check(CLI::PositiveNumber);
-  g->add_flag("--no-decimate", o.no_decimate, "7. Keep the face count");
-  g->add_option("--decimate-ratio", o.decimate_ratio, fmt::format("7. Keep this fraction of the faces [{}]", d.decimate_ratio))
-      ->check(CLI::Range(0.0, 1.0));
-  g->add_option("--decimate-faces", o.decimate_faces, "7. Target face count (overrides the ratio)")->check(CLI::PositiveNumber);
-  g->add_option("--decimate-max-error", o.decimate_max_error,
-                "7. Also stop when a collapse would cost more than this quadric error, m (0 = off) [0]")
-      ->check(CLI::NonNegativeNumber);
   g->add_option("--self-intersections", o.self_intersections,
                 "8. report (count pairs), remove (CGAL experimental), off [" + d.self_intersections + "]")
       ->check(CLI::IsMember({"report", "remove", "off"}));
@@ -208,20 +213,21 @@ int main(int argc, char** argv) {
     if (frames.size() > 1 && IsMeshFile(out) && !fs::is_directory(out, ec))
       throw Error(ExitCode::kUsage, "several inputs need an output folder, not a file", output);
     for (Frame& f : frames) {
-      std::string ext = format.empty() ? f.input.extension().string() : "." + format;
-      std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return char(std::tolower(c)); });
       if (to_file) {
-        f.output = out;
-        if (!format.empty()) f.output.replace_extension(ext);
-      } else if (f.number >= 0) {
-        f.output = io::FramePath(out, f.stem + "_clean", f.number, ext.substr(1));
+        f.outputs = {out};
       } else {
-        f.output = out / (f.stem + "_clean" + ext);
+        const std::string stem = f.stem + "_clean";
+        auto name = [&](const std::string& ext) {
+          return f.number >= 0 ? io::FramePath(out, stem, f.number, ext) : out / (stem + "." + ext);
+        };
+        if (format != "ply") f.outputs.push_back(name("obj"));
+        if (format != "obj") f.outputs.push_back(name("ply"));
+        f.report = name("json");
       }
-      if (fs::exists(f.output, ec) && fs::equivalent(f.output, f.input, ec))
-        throw Error(ExitCode::kUsage, "output would overwrite its input", f.output.string());
+      for (const fs::path& o : f.outputs)
+        if (fs::exists(o, ec) && fs::equivalent(o, f.input, ec))
+          throw Error(ExitCode::kUsage, "output would overwrite its input", o.string());
     }
-
     log::Info("cleaning {} frame(s) with {} thread(s)", frames.size(), exec::CpuThreads());
     std::vector<nlohmann::json> reports(frames.size());
     std::vector<std::string> lines(frames.size());
@@ -244,7 +250,7 @@ int main(int argc, char** argv) {
           Rethrow(e, f.input);
         }
         const auto t1 = std::chrono::steady_clock::now();
-        io::WriteMesh(f.output, result.mesh);
+        for (const fs::path& o : f.outputs) io::WriteMesh(o, result.mesh);
         const double write_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t1).count();
         for (const std::string& w : result.report.warnings) log::Warn("{}: {}", f.input.string(), w);
         warnings += result.report.warnings.size();
@@ -252,10 +258,12 @@ int main(int argc, char** argv) {
         faces_out += result.report.after.faces;
         nlohmann::json j = meshfix::ToJson(result.report);
         j["input"] = f.input.string();
-        j["output"] = f.output.string();
+        j["outputs"] = nlohmann::json::array();
+        for (const fs::path& o : f.outputs) j["outputs"].push_back(o.string());
         if (f.number >= 0) j["frame"] = f.number;
         j["read_seconds"] = read_s;
         j["write_seconds"] = write_s;
+        if (!f.report.empty()) WriteFileAtomically(f.report, j.dump(2) + "\n");
         reports[i] = std::move(j);
         lines[i] = f.input.filename().string() + ": " + meshfix::SummaryLine(result.report);
         log::Debug("{}", lines[i]);
@@ -285,7 +293,8 @@ int main(int argc, char** argv) {
                               {"warnings", warnings.load()},
                               {"peak_memory_bytes", tool::PeakMemoryBytes()}};
     nlohmann::json outputs = nlohmann::json::array();
-    for (const Frame& f : frames) outputs.push_back(f.output.string());
+    for (const Frame& f : frames)
+      for (const fs::path& o : f.outputs) outputs.push_back(o.string());
     summary["outputs"] = outputs;
     summary["reports"] = reports;
     tool::WriteSummary(common, summary);

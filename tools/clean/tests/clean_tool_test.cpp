@@ -89,7 +89,14 @@ TEST_F(CleanTool, SequenceToFolderWithFramesAndFormat) {
   EXPECT_FALSE(fs::exists(dir_ / "out" / "ice_clean.0001.ply"));
   EXPECT_TRUE(fs::exists(dir_ / "out" / "ice_clean.0002.ply"));
   EXPECT_TRUE(fs::exists(dir_ / "out" / "ice_clean.0003.ply"));
+  EXPECT_FALSE(fs::exists(dir_ / "out" / "ice_clean.0003.obj"));  // --format ply
+  EXPECT_TRUE(fs::exists(dir_ / "out" / "ice_clean.0003.json"));   // per-frame report
   EXPECT_GT(io::ReadMesh(dir_ / "out" / "ice_clean.0003.ply").triangle_count(), 0u);
+  // The rime-bake call: one frame into a folder gives OBJ, PLY and the report.
+  r = Clean((dir_ / "in" / "ice.0001.obj").string() + " -o " + (dir_ / "bake").string(), dir_);
+  ASSERT_EQ(r.code, 0) << r.err;
+  for (const char* name : {"ice_clean.0001.obj", "ice_clean.0001.ply", "ice_clean.0001.json"})
+    EXPECT_TRUE(fs::exists(dir_ / "bake" / name)) << name;
   // Several inputs and a file name: refused as a usage error.
   r = Clean((dir_ / "in").string() + " -o " + (dir_ / "x.obj").string(), dir_);
   EXPECT_EQ(r.code, 2) << r.err;

@@ -3,7 +3,7 @@
 ///
 /// One struct is both the scene section and the options of rime::meshfix::Clean, so a default
 /// lives in exactly one place. Lengths in m, areas in m^2, volumes in m^3. README.md
-/// "rime-clean" documents every field; the operations run in the order they are listed here.
+/// "rime-clean" documents every field; the operations run in the order they are numbered here.
 #pragma once
 
 #include <string>
@@ -43,21 +43,21 @@ struct CleanupSettings {
   double target_edge_factor = 1.0;
   int remesh_iterations = 1;
 
-  // 6. Smoothing. "tangential": tangential relaxation (moves vertices within the tangent plane,
-  // keeps the volume); "angle": angle smoothing (CGAL angle_and_area_smoothing without area
-  // term, which needs Ceres); "none". Shape smoothing (mean-curvature flow) is separate, off by default.
-  std::string smooth = "tangential";
-  int smooth_iterations = 2;
-  int shape_smooth_iterations = 0;
-  double shape_smooth_time = 1e-4;  // time step of the implicit mean-curvature flow, s (CGAL's unit)
-
-  // 7. Decimation (Garland-Heckbert plane quadrics, edge collapse). Target faces = decimate_faces
+  // 6. Decimation (Garland-Heckbert plane quadrics, edge collapse). Target faces = decimate_faces
   // when > 0, else decimate_ratio x current faces; max_error > 0 also stops as soon as the
   // cheapest collapse would move the surface more than this (m, RMS plane distance).
   bool decimate = true;
   double decimate_ratio = 0.5;
   long long decimate_faces = 0;
   double decimate_max_error = 0;  // m
+
+  // 7. Smoothing, after decimation: it evens out the triangles the collapses leave.
+  // "tangential": tangential relaxation (moves vertices within the tangent plane, keeps the volume); "angle": angle smoothing (CGAL angle_and_area_smoothing without area
+  // term, which needs Ceres); "none". Shape smoothing (mean-curvature flow) is separate, off by default.
+  std::string smooth = "tangential";
+  int smooth_iterations = 2;
+  int shape_smooth_iterations = 0;
+  double shape_smooth_time = 1e-4;  // time step of the implicit mean-curvature flow, s (CGAL's unit)
 
   // 8. Self-intersections: "report" (count pairs), "remove" (CGAL 5.5 experimental removal, then
   // count again), "off".
