@@ -81,6 +81,9 @@ void WriteDataset(hid_t group, const std::string& name, const std::vector<T>& va
   const hsize_t n = values.size();
   Handle space(H5Screate_simple(1, &n, nullptr), H5Sclose);
   Handle properties(H5Pcreate(H5P_DATASET_CREATE), H5Pclose);
+  // No modification times in the object headers: the same particles give byte-identical files,
+  // which rime-bake's early cutoff relies on (a rerun with identical output dirties nothing).
+  H5Pset_obj_track_times(properties, false);
   if (n > 0 && options.compression_level > 0) {
     const hsize_t chunk = std::min<hsize_t>(n, 1 << 16);
     H5Pset_chunk(properties, 1, &chunk);
