@@ -55,8 +55,8 @@ std::vector<std::string> SectionsReadBy(Stage stage, const SceneDocument& doc) {
         if (s != "surface" && s != "cleanup" && s != "bake") sections.push_back(s);
       return sections;
     }
-    case Stage::kSurface:
-      return {"surface", "water", "scene.quality"};
+    case Stage::kSurface:  // [freezing] holds the ice anisotropy parameters (k_r, k_n, N_eps) it may reuse
+      return {"surface", "water", "freezing", "scene.quality"};
     case Stage::kCleanup:
       return {"cleanup", "surface", "water", "scene.quality"};
     case Stage::kPreview:
