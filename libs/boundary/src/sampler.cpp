@@ -276,16 +276,38 @@ SurfaceSamples SampleSurface(const io::TriMesh& mesh, const SampleOptions& optio
   // vertices first, then edges, then faces), which is what the sequential loop below computes.
   if (options.remove_near_duplicates && total > 1) {
     // Only particles with an earlier particle within the radius can be removed; find them in
-    // parallel, then run the greedy rule over those alone.
-    const float radius = float(kDuplicateRadius * d);
+    // parallel, one grid cell at a time (its neighbour cells are looked up once for all of its
+    // particles), then run the greedy rule over those alone.
+    const float radius = float(kDuplicateRadius * d), radius2 = radius * radius;
     neighbors::UniformGrid<float> grid(cpu);
-    grid.Build(positions.data(), Index(total), float(d));  // ~ one particle per cell on a surface
+    grid.Build(positions.data(), Index(total), float(2 * d));  // a few particles per cell on a surface
     const neighbors::GridView<float> view = grid.view();
     std::vector<std::uint8_t> has_earlier(total, 0), keep(total, 1);
-    exec::cpu::ParallelFor(Index(total), [&](Index i) {
-      bool earlier = false;
-      view.ForEachNeighbor(positions[i], radius, [&](std::uint32_t j, const Vec3f&, float) { earlier = earlier || j < i; });
-      has_earlier[i] = earlier;
+    exec::cpu::ParallelFor(Index(grid.cell_count()), [&](Index cell) {
+      const std::uint32_t begin = view.cell_start[cell], end = view.cell_start[cell + 1];
+      const Vec3f first = positions[view.sorted_index[begin]];
+      const float size = float(2 * d);
+      const Vec3f center(view.origin.x + (float(view.CellCoord(first.x, view.origin.x)) + 0.5f) * size,
+                         view.origin.y + (float(view.CellCoord(first.y, view.origin.y)) + 0.5f) * size,
+                         view.origin.z + (float(view.CellCoord(first.z, view.origin.z)) + 0.5f) * size);
+      std::uint32_t range_begin[27], range_end[27];
+      int ranges = 0;
+      view.ForEachCandidateCell(center, 2 * size, [&](std::uint32_t b, std::uint32_t e) {
+        range_begin[ranges] = b, range_end[ranges] = e, ++ranges;
+      });
+      for (std::uint32_t s = begin; s < end; ++s) {
+        const std::uint32_t i = view.sorted_index[s];
+        bool earlier = false;
+        for (int k = 0; k < ranges && !earlier; ++k)
+          for (std::uint32_t t = range_begin[k]; t < range_end[k]; ++t) {
+            const std::uint32_t j = view.sorted_index[t];
+            if (j < i && SquaredNorm(positions[i] - positions[j]) < radius2) {
+              earlier = true;
+              break;
+            }
+          }
+        has_earlier[i] = earlier;
+      }
     });
     std::size_t removed = 0;
     for (std::size_t i = 0; i < total; ++i) {

@@ -22,7 +22,11 @@ void ComputeBoundaryVolumes(const exec::Device& device, const Vec3<T>* positions
   const auto t0 = std::chrono::steady_clock::now();
   grid.Build(positions, n, kernel.SupportRadius());
   const auto t1 = std::chrono::steady_clock::now();
-  exec::ParallelFor(device, n, kernels::BoundaryVolume<T>{grid.view(), kernel, volumes});
+  // One thread per particle on the GPU; on the CPU one task per cell shares the cell lookups.
+  if (device.is_cuda())
+    exec::ParallelFor(device, n, kernels::BoundaryVolume<T>{grid.view(), kernel, volumes});
+  else
+    exec::ParallelFor(device, Index(grid.cell_count()), kernels::BoundaryVolumeByCell<T>{grid.view(), kernel, volumes});
   exec::Synchronize(device);
   const auto t2 = std::chrono::steady_clock::now();
   log::Debug("boundary volumes of {} particles: grid {:.1f} ms, kernel {:.1f} ms", n,

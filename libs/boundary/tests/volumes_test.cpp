@@ -6,8 +6,11 @@
 
 #include "rime/boundary/sampler.h"
 #include "rime/boundary/shapes.h"
+#include "rime/boundary/volume_kernels.h"
 #include "rime/boundary/volumes.h"
 #include "rime/core/kernel.h"
+#include "rime/exec/parallel.h"
+#include "rime/neighbors/grid.h"
 
 namespace rime::boundary {
 namespace {
@@ -40,6 +43,21 @@ void CompareWithBruteForce() {
 
 TEST(BoundaryVolumes, KernelMatchesBruteForceFloat) { CompareWithBruteForce<float>(); }
 TEST(BoundaryVolumes, KernelMatchesBruteForceDouble) { CompareWithBruteForce<double>(); }
+
+// The per-particle kernel (the one the GPU runs) and the per-cell kernel (the CPU's) agree exactly.
+TEST(BoundaryVolumes, PerParticleAndPerCellKernelsAgree) {
+  SampleOptions options;
+  options.spacing = 0.01;
+  const SurfaceSamples s = SampleSurface(MakeTorus(0.2, 0.05, options.spacing), options);
+  const exec::Device cpu = exec::Device::Cpu();
+  const CubicSpline<float> kernel(0.02f);
+  neighbors::UniformGrid<float> grid(cpu);
+  grid.Build(s.positions.data(), Index(s.size()), kernel.SupportRadius());
+  std::vector<float> per_particle(s.size()), per_cell(s.size());
+  exec::ParallelFor(cpu, Index(s.size()), kernels::BoundaryVolume<float>{grid.view(), kernel, per_particle.data()});
+  exec::ParallelFor(cpu, Index(grid.cell_count()), kernels::BoundaryVolumeByCell<float>{grid.view(), kernel, per_cell.data()});
+  for (std::size_t i = 0; i < s.size(); ++i) ASSERT_EQ(per_particle[i], per_cell[i]) << i;
+}
 
 TEST(BoundaryVolumes, EmptyInput) {
   EXPECT_TRUE(ComputeBoundaryVolumes<float>(exec::Device::Cpu(), std::vector<Vec3f>{}, 0.1f).empty());

@@ -29,7 +29,48 @@ struct BoundaryVolume {
   }
 };
 
+/// The same V_b, one grid cell per call: the (up to 27) neighbour cell ranges are looked up once
+/// for all particles of the cell instead of once per particle, which is what costs most on the
+/// CPU. Gives bit-identical results to BoundaryVolume (same cells in the same order).
+template <class T>
+struct BoundaryVolumeByCell {
+  neighbors::GridView<T> grid;
+  CubicSpline<T> kernel;
+  T* volumes;
+  RIME_HD void operator()(Index cell) const {
+    const std::uint32_t begin = grid.cell_start[cell], end = grid.cell_start[cell + 1];
+    const T size = T(1) / grid.inv_cell;
+    const Vec3<T> first = grid.points[grid.sorted_index[begin]];
+    const Vec3<T> center(grid.origin.x + (T(grid.CellCoord(first.x, grid.origin.x)) + T(0.5)) * size,
+                         grid.origin.y + (T(grid.CellCoord(first.y, grid.origin.y)) + T(0.5)) * size,
+                         grid.origin.z + (T(grid.CellCoord(first.z, grid.origin.z)) + T(0.5)) * size);
+    std::uint32_t range_begin[27], range_end[27];
+    int ranges = 0;
+    // A radius beyond the cell's half diagonal keeps all 27 cells.
+    grid.ForEachCandidateCell(center, T(2) * size, [&](std::uint32_t b, std::uint32_t e) {
+      range_begin[ranges] = b;
+      range_end[ranges] = e;
+      ++ranges;
+    });
+    const T r2max = kernel.SupportRadius() * kernel.SupportRadius();
+    for (std::uint32_t s = begin; s < end; ++s) {
+      const std::uint32_t b = grid.sorted_index[s];
+      const Vec3<T> x = grid.points[b];
+      T density_number = kernel.W0();
+      for (int k = 0; k < ranges; ++k)
+        for (std::uint32_t t = range_begin[k]; t < range_end[k]; ++t) {
+          const std::uint32_t j = grid.sorted_index[t];
+          const Vec3<T> r = x - grid.points[j];
+          const T r2 = Dot(r, r);
+          if (r2 < r2max && j != b) density_number += kernel.W(std::sqrt(r2));
+        }
+      volumes[b] = T(1) / density_number;
+    }
+  }
+};
+
 }  // namespace rime::boundary::kernels
 
-#define RIME_BOUNDARY_KERNELS(X) \
-  X(rime::boundary::kernels::BoundaryVolume<float>) X(rime::boundary::kernels::BoundaryVolume<double>)
+#define RIME_BOUNDARY_KERNELS(X)                                                                       \
+  X(rime::boundary::kernels::BoundaryVolume<float>) X(rime::boundary::kernels::BoundaryVolume<double>) \
+  X(rime::boundary::kernels::BoundaryVolumeByCell<float>) X(rime::boundary::kernels::BoundaryVolumeByCell<double>)
