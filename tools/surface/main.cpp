@@ -1,0 +1,299 @@
+// rime-surface: particle frames -> OpenVDB level sets and triangle meshes (README "rime-surface").
+#include <tbb/parallel_for.h>
+
+#include <fmt/format.h>
+
+#include <atomic>
+#include <chrono>
+#include <filesystem>
+#include <map>
+#include <mutex>
+#include <regex>
+#include <set>
+#include <sstream>
+
+#include "rime/core/error.h"
+#include "rime/core/log.h"
+#include "rime/core/progress.h"
+#include "rime/io/mesh.h"
+#include "rime/io/particles.h"
+#include "rime/io/scene.h"
+#include "rime/surface/frame_input.h"
+#include "rime/surface/reconstruct.h"
+#include "tool.h"
+
+namespace fs = std::filesystem;
+using namespace rime;
+
+namespace {
+
+struct Options {
+  std::vector<std::string> inputs;
+  std::string output;
+  std::string scene;
+  std::string phase;
+  std::string field;
+  double voxel_size = -1, r_iso = -1, lambda = -1, k_r = -1, k_s = -1, k_n = -1, iso = -1, memory_budget_gb = -1;
+  int resolution = -1, n_eps = -1, smooth = -1;
+  bool velocity = false, density = false, strict = false, keep_voids = false;
+  std::string formats;
+};
+
+struct FrameFile {
+  std::int64_t frame = 0;
+  fs::path path;
+};
+
+const std::regex kFrameName(R"(^(.*)\.(\d+)\.h5part$)");
+
+// Frame files of a folder, or of the sequence an index file (`particles.h5part`) belongs to.
+std::vector<FrameFile> ListSequence(const fs::path& folder, const std::string& stem) {
+  std::vector<FrameFile> out;
+  for (const auto& entry : fs::directory_iterator(folder)) {
+    std::smatch m;
+    const std::string name = entry.path().filename().string();
+    if (entry.is_regular_file() && std::regex_match(name, m, kFrameName) && (stem.empty() || m[1] == stem))
+      out.push_back({std::stoll(m[2]), entry.path()});
+  }
+  return out;
+}
+
+std::vector<FrameFile> CollectFrames(const std::vector<std::string>& inputs, const tool::FrameRange& range, bool range_given) {
+  std::map<std::int64_t, fs::path> frames;
+  bool sequence = false;
+  for (const std::string& input : inputs) {
+    const fs::path path(input);
+    std::error_code ec;
+    if (fs::is_directory(path, ec)) {
+      sequence = true;
+      for (const FrameFile& f : ListSequence(path, "")) frames.emplace(f.frame, f.path);
+      continue;
+    }
+    if (!fs::exists(path, ec)) throw InputError("input frame not found", input);
+    std::smatch m;
+    const std::string name = path.filename().string();
+    if (!std::regex_match(name, m, kFrameName)) {
+      // A sequence index (e.g. particles.h5part): its frames are the numbered files beside it.
+      sequence = true;
+      const std::string stem = path.stem().string();
+      for (const FrameFile& f : ListSequence(path.parent_path().empty() ? fs::path(".") : path.parent_path(), stem))
+        frames.emplace(f.frame, f.path);
+      continue;
+    }
+    // The frame number is the file's `frame` attribute (names may be renamed).
+    const io::ParticleFrame header = io::ReadParticleFrameHeader(path, "particles");
+    frames.emplace(header.frame, path);
+  }
+  std::vector<FrameFile> out;
+  for (const auto& [frame, path] : frames)
+    if (range.Contains(frame)) out.push_back({frame, path});
+  if (range_given) {
+    // Every frame of the requested range must be there: name the missing ones before writing anything.
+    std::vector<std::int64_t> missing;
+    const std::int64_t first = range.first, last = range.last == INT64_MAX ? (out.empty() ? first : out.back().frame) : range.last;
+    for (std::int64_t f = first; f <= last && missing.size() < 20; ++f)
+      if (!frames.count(f)) missing.push_back(f);
+    if (!missing.empty())
+      throw InputError(fmt::format("missing frame{} {} in range {}-{}", missing.size() > 1 ? "s" : "", fmt::join(missing, ", "),
+                                   first, last),
+                       inputs.size() == 1 ? inputs[0] : "inputs");
+  }
+  if (out.empty())
+    throw InputError(sequence ? "no frame files (NAME.NNNN.h5part) found" : "no input frames in the requested range",
+                     fmt::format("{}", fmt::join(inputs, " ")));
+  return out;
+}
+
+struct PhaseJob {
+  io::Phase phase;
+  std::string prefix;
+  surface::Field field;
+};
+
+struct FrameReport {
+  std::int64_t frame = 0;
+  std::string phase;
+  surface::Stats stats;
+  double seconds = 0;
+  std::vector<std::string> files;
+};
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"Turns ice (and water) particles of rime-sim frames into OpenVDB level sets and triangle meshes "
+               "(anisotropic ellipsoids, spec §10)."};
+  tool::CommonOptions common;
+  tool::Setup(app, "rime-surface", common, tool::kThreads | tool::kFrames | tool::kJsonSummary);
+  Options o;
+  app.add_option("frames", o.inputs, "Particle frames (NAME.NNNN.h5part), a folder of them, or the sequence index NAME.h5part")
+      ->required();
+  app.add_option("-o,--output", o.output, "Output folder (created); writes ice.NNNN.{vdb,obj,ply} and water.NNNN.*")->required();
+  app.add_option("--scene", o.scene, "Scene file whose [surface] section gives the defaults (flags override it)");
+  app.add_option("--phase", o.phase, "Which particles to surface: ice, water or both (default ice)")
+      ->check(CLI::IsMember({"ice", "water", "both"}));
+  app.add_option("--field", o.field,
+                 "Field for every phase: ellipsoids (union of anisotropic ellipsoids, Eq. 41; ice default), kernel_sum "
+                 "(Yu & Turk sum of anisotropic kernels at --iso; water default) or isotropic (spheres of radius r_iso)")
+      ->check(CLI::IsMember({"ellipsoids", "kernel_sum", "isotropic"}));
+  app.add_option("--voxel-size", o.voxel_size, "Voxel size in m (default: particle spacing / 2)")->check(CLI::PositiveNumber);
+  app.add_option("--resolution", o.resolution,
+                 "Paper's fixed grid: voxel = longest side of the padded bounding box / (N - 1), e.g. 200 (default off)")
+      ->check(CLI::Range(2, 4096));
+  app.add_option("--r-iso", o.r_iso, "Ellipsoid level r_iso in particle spacings (default 0.75)")->check(CLI::Range(1e-3, 4.0));
+  app.add_option("--lambda", o.lambda, "Yu & Turk centre smoothing, 0 = off (default 0.9)")->check(CLI::Range(0.0, 1.0));
+  app.add_option("--kr", o.k_r, "Largest stretch ratio k_r (default 4)")->check(CLI::Range(1.0, 1000.0));
+  app.add_option("--ks", o.k_s, "Stretch scale k_s in 1/m^2; 0 = automatic 1/(0.2994 h^2) (default 0)")->check(CLI::NonNegativeNumber);
+  app.add_option("--kn", o.k_n, "Stretch of particles with fewer than N_eps neighbours (default 0.5)")->check(CLI::Range(1e-3, 10.0));
+  app.add_option("--neps", o.n_eps, "Minimum neighbour count N_eps for a trusted PCA (default 6)")->check(CLI::Range(0, 1000));
+  app.add_option("--iso", o.iso, "Iso value of the kernel_sum field (default 0.5)")->check(CLI::PositiveNumber);
+  app.add_option("--smooth", o.smooth, "OpenVDB level-set mean-curvature smoothing iterations (default 0)")->check(CLI::Range(0, 100));
+  app.add_flag("--vel", o.velocity, "Add a `vel` vec3 grid (particle velocities, for motion blur) to the VDB");
+  app.add_flag("--density", o.density, "Add a `density` fog grid (Blender's volume shader shows it without setup)");
+  app.add_option("--format", o.formats, "Comma-separated outputs among obj, ply, vdb (default obj,vdb)");
+  app.add_option("--memory-budget", o.memory_budget_gb, "Refuse frames whose estimated peak memory exceeds this many GB (default: no limit)")
+      ->check(CLI::PositiveNumber);
+  app.add_flag("--strict", o.strict, "Refuse ice frames without stored anisotropy instead of falling back to isotropic");
+  app.add_flag("--keep-voids", o.keep_voids, "Keep enclosed gaps between ellipsoids as voids (inner shells in the mesh)");
+
+  return tool::Main(app, argc, argv, common, [&]() -> int {
+    const auto start = std::chrono::steady_clock::now();
+    io::SurfaceSettings defaults;
+    if (!o.scene.empty()) defaults = io::LoadScene(o.scene).surface;
+    const std::string phase = o.phase.empty() ? defaults.phase : o.phase;
+    std::vector<std::string> formats = defaults.formats;
+    if (!o.formats.empty()) {
+      formats.clear();
+      std::stringstream list(o.formats);
+      for (std::string f; std::getline(list, f, ',');) {
+        if (f != "obj" && f != "ply" && f != "vdb")
+          throw Error(ExitCode::kUsage, fmt::format("unknown format '{}' (expected obj, ply or vdb)", f), "--format");
+        formats.push_back(f);
+      }
+    }
+    const auto has = [&](const char* f) { return std::find(formats.begin(), formats.end(), f) != formats.end(); };
+
+    surface::Settings settings;
+    settings.voxel_ratio = defaults.voxel_ratio;
+    settings.voxel_size = o.voxel_size > 0 ? o.voxel_size : defaults.voxel_size;
+    settings.resolution = o.resolution >= 0 ? o.resolution : defaults.resolution;
+    if (o.voxel_size > 0 && o.resolution > 0) throw Error(ExitCode::kUsage, "give --voxel-size or --resolution, not both");
+    if (o.voxel_size > 0) settings.resolution = 0;
+    settings.r_iso = o.r_iso > 0 ? o.r_iso : defaults.r_iso;
+    settings.lambda = o.lambda >= 0 ? o.lambda : defaults.lambda;
+    settings.anisotropy.k_r = o.k_r > 0 ? o.k_r : defaults.k_r;
+    settings.anisotropy.k_s = o.k_s >= 0 ? o.k_s : defaults.k_s;
+    settings.anisotropy.k_n = o.k_n > 0 ? o.k_n : defaults.k_n;
+    settings.anisotropy.n_eps = o.n_eps >= 0 ? o.n_eps : defaults.n_eps;
+    settings.iso = o.iso > 0 ? o.iso : defaults.iso;
+    settings.half_band = defaults.half_band;
+    settings.smooth_iterations = o.smooth >= 0 ? o.smooth : defaults.smooth;
+    settings.velocity_grid = (o.velocity || defaults.velocity) && has("vdb");
+    settings.density_grid = (o.density || defaults.density) && has("vdb");
+    settings.mesh = has("obj") || has("ply");
+    settings.mesh_velocities = has("ply");
+    settings.keep_voids = o.keep_voids;
+    const double budget_gb = o.memory_budget_gb > 0 ? o.memory_budget_gb : defaults.memory_budget_gb;
+
+    std::vector<PhaseJob> jobs;
+    const auto field_for = [&](const std::string& phase_default) {
+      return surface::ParseField(o.field.empty() ? phase_default : o.field);
+    };
+    if (phase == "ice" || phase == "both") jobs.push_back({io::Phase::kIce, "ice", field_for(defaults.ice_field)});
+    if (phase == "water" || phase == "both") jobs.push_back({io::Phase::kFluid, "water", field_for(defaults.water_field)});
+
+    const tool::FrameRange range = tool::ParseFrames(common.frames);
+    const std::vector<FrameFile> frames = CollectFrames(o.inputs, range, !common.frames.empty());
+    std::error_code ec;
+    fs::create_directories(o.output, ec);
+    if (ec || !fs::is_directory(o.output)) throw IoError("cannot create the output folder", o.output);
+
+    surface::SelectOptions select;
+    select.strict = o.strict;
+    std::mutex mutex;
+    std::vector<FrameReport> reports;
+    Progress progress("frames", Index(frames.size()));
+    tbb::parallel_for(std::size_t(0), frames.size(), [&](std::size_t k) {
+      const FrameFile& ff = frames[k];
+      const io::ParticleFrame frame = io::ReadParticleFrame(ff.path, "particles");
+      for (const PhaseJob& job : jobs) {
+        const auto t0 = std::chrono::steady_clock::now();
+        std::vector<std::string> warnings;
+        surface::ParticleSet particles = surface::SelectPhase(frame, job.phase, select, warnings);
+        for (const auto& w : warnings) log::Warn("{}", w);
+        if (particles.size() == 0)
+          log::Warn("{}: frame {} has no {} particles; writing empty {} outputs", ff.path.string(), frame.frame, job.prefix,
+                    job.prefix);
+        surface::Settings s = settings;
+        s.field = job.field;
+        if (budget_gb > 0) {
+          const double estimate = double(surface::EstimateMemoryBytes(particles, s));
+          if (estimate > budget_gb * 1e9)
+            throw InputError(fmt::format("frame {} {}: estimated peak memory {:.2f} GB exceeds --memory-budget {:.2f} GB at voxel "
+                                         "size {:.4g} m; use a larger --voxel-size",
+                                         frame.frame, job.prefix, estimate / 1e9, budget_gb, surface::VoxelSize(particles, s)),
+                             ff.path.string());
+        }
+        const surface::Result result = surface::Reconstruct(particles, s);
+        FrameReport report;
+        report.frame = frame.frame;
+        report.phase = job.prefix;
+        report.stats = result.stats;
+        if (has("vdb")) {
+          const fs::path p = io::FramePath(o.output, job.prefix, frame.frame, "vdb");
+          surface::WriteVdb(p, result);
+          report.files.push_back(p.string());
+        }
+        for (const char* ext : {"obj", "ply"}) {
+          if (!has(ext)) continue;
+          const fs::path p = io::FramePath(o.output, job.prefix, frame.frame, ext);
+          io::WriteMesh(p, result.mesh);
+          report.files.push_back(p.string());
+        }
+        report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+        log::Debug("frame {} {}: {} particles, {} active voxels, {} triangles, {:.2f} s (prepare {:.2f}, rasterize {:.2f}, "
+                   "filters {:.2f}, mesh {:.2f})",
+                   report.frame, report.phase, report.stats.particles, report.stats.active_voxels, report.stats.triangles,
+                   report.seconds, report.stats.seconds_prepare, report.stats.seconds_rasterize, report.stats.seconds_filter,
+                   report.stats.seconds_mesh);
+        std::lock_guard<std::mutex> lock(mutex);
+        reports.push_back(std::move(report));
+      }
+      progress.Advance();
+    });
+    progress.Finish();
+    std::sort(reports.begin(), reports.end(), [](const FrameReport& a, const FrameReport& b) {
+      return std::tie(a.frame, a.phase) < std::tie(b.frame, b.phase);
+    });
+
+    const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    const std::uint64_t peak = tool::PeakMemoryBytes();
+    nlohmann::json summary;
+    summary["tool"] = "rime-surface";
+    summary["output"] = o.output;
+    summary["seconds"] = seconds;
+    summary["peak_memory_bytes"] = peak;
+    std::uint64_t particles = 0, voxels = 0, triangles = 0;
+    for (const FrameReport& r : reports) {
+      particles += r.stats.particles, voxels += r.stats.active_voxels, triangles += r.stats.triangles;
+      summary["frames"].push_back({{"frame", r.frame},
+                                   {"phase", r.phase},
+                                   {"particles", r.stats.particles},
+                                   {"active_voxels", r.stats.active_voxels},
+                                   {"triangles", r.stats.triangles},
+                                   {"voxel_size", r.stats.voxel_size},
+                                   {"filled_void_voxels", r.stats.filled_void_voxels},
+                                   {"seconds", r.seconds},
+                                   {"files", r.files}});
+      log::Info("frame {:>5} {:<5} {:>9} particles {:>10} active voxels {:>9} triangles {:>8.2f} s", r.frame, r.phase,
+                r.stats.particles, r.stats.active_voxels, r.stats.triangles, r.seconds);
+    }
+    summary["particles"] = particles;
+    summary["active_voxels"] = voxels;
+    summary["triangles"] = triangles;
+    log::Info("{} frame(s): {} particles read, {} active voxels, {} triangles in {:.2f} s; peak memory {:.0f} MB; output in {}",
+              frames.size(), particles, voxels, triangles, seconds, peak / 1e6, o.output);
+    tool::WriteSummary(common, summary);
+    return 0;
+  });
+}

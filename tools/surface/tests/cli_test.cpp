@@ -1,0 +1,151 @@
+// rime-surface command line: outputs per frame and phase, bad input, nothing half-written.
+#include <gtest/gtest.h>
+#include <hdf5.h>
+
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+#include "rime/io/mesh.h"
+#include "rime/io/particles.h"
+
+namespace {
+
+namespace fs = std::filesystem;
+const std::string kTool = std::string(RIME_BINARY_DIR) + "/bin/rime-surface";
+
+struct RunResult {
+  int code = 0;
+  std::string output;
+};
+
+RunResult Execute(const std::string& args) {
+  const fs::path log = fs::temp_directory_path() / "rime_surface_cli.log";
+  const int status = std::system((kTool + " " + args + " > " + log.string() + " 2>&1").c_str());
+  std::ifstream in(log);
+  std::stringstream text;
+  text << in.rdbuf();
+  return {WEXITSTATUS(status), text.str()};
+}
+
+// A ball of ice (with stored isotropic anisotropy unless `anisotropy` is false) and a ball of water.
+rime::io::ParticleFrame MakeFrame(std::int64_t number, bool ice, bool anisotropy = true) {
+  rime::io::ParticleFrame frame;
+  frame.spacing = 0.02;
+  frame.frame = number;
+  std::vector<rime::Vec3f> positions;
+  std::vector<std::uint8_t> phase;
+  for (int i = -4; i <= 4; ++i)
+    for (int j = -4; j <= 4; ++j)
+      for (int k = -4; k <= 4; ++k) {
+        if (i * i + j * j + k * k > 16) continue;
+        if (ice) positions.push_back(rime::Vec3f(i, j, k) * 0.02f), phase.push_back(2);
+        positions.push_back(rime::Vec3f(i + 20, j, k) * 0.02f), phase.push_back(0);
+      }
+  const std::size_t n = positions.size();
+  frame.SetPositions(positions);
+  frame.Set("vx", std::vector<float>(n, 0.5f));
+  frame.Set("vy", std::vector<float>(n, 0.0f));
+  frame.Set("vz", std::vector<float>(n, 0.0f));
+  frame.Set("phase", phase);
+  std::vector<std::int64_t> id(n);
+  for (std::size_t i = 0; i < n; ++i) id[i] = std::int64_t(i);
+  frame.Set("id", id);
+  if (anisotropy)
+    for (int c = 0; c < 6; ++c) frame.Set("anisotropy_" + std::to_string(c), std::vector<float>(n, c < 3 ? 1.0f : 0.0f));
+  return frame;
+}
+
+class Cli : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() / ("rime_surface_cli_" + std::string(::testing::UnitTest::GetInstance()->current_test_info()->name()));
+    fs::remove_all(dir_);
+    fs::create_directories(dir_ / "sim");
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+  fs::path Frame(std::int64_t n) const { return rime::io::FramePath(dir_ / "sim", "particles", n, "h5part"); }
+  std::string Sim() const { return (dir_ / "sim").string(); }
+  std::string Out() const { return (dir_ / "out").string(); }
+  std::size_t OutputFiles() const {
+    if (!fs::exists(dir_ / "out")) return 0;
+    return std::size_t(std::distance(fs::directory_iterator(dir_ / "out"), fs::directory_iterator()));
+  }
+  fs::path dir_;
+};
+
+TEST_F(Cli, WritesEveryFormatForBothPhases) {
+  for (int f : {1, 2}) rime::io::WriteParticleFrame(Frame(f), MakeFrame(f, true));
+  const std::string json = (dir_ / "summary.json").string();
+  const RunResult run = Execute(Sim() + " -o " + Out() + " --phase both --format obj,ply,vdb --vel --density --json-summary " + json);
+  ASSERT_EQ(run.code, 0) << run.output;
+  for (const char* prefix : {"ice", "water"})
+    for (int f : {1, 2})
+      for (const char* ext : {"vdb", "obj", "ply"}) EXPECT_TRUE(fs::exists(rime::io::FramePath(Out(), prefix, f, ext))) << prefix << f << ext;
+  const rime::io::TriMesh ply = rime::io::ReadMesh(rime::io::FramePath(Out(), "water", 2, "ply"));
+  ASSERT_FALSE(ply.empty());
+  ASSERT_EQ(ply.velocities.size(), ply.positions.size());
+  EXPECT_NEAR(ply.velocities[0].x, 0.5f, 1e-5f);
+  const rime::io::TriMesh obj = rime::io::ReadMesh(rime::io::FramePath(Out(), "ice", 1, "obj"));
+  EXPECT_EQ(obj.normals.size(), obj.positions.size());
+  EXPECT_TRUE(fs::exists(json));
+  EXPECT_NE(run.output.find("particles read"), std::string::npos) << run.output;
+}
+
+TEST_F(Cli, MissingFramesInARangeFailBeforeWriting) {
+  for (int f : {1, 2, 4}) rime::io::WriteParticleFrame(Frame(f), MakeFrame(f, true));
+  const RunResult run = Execute(Sim() + " -o " + Out() + " --frames 1-4");
+  EXPECT_EQ(run.code, 3) << run.output;
+  EXPECT_NE(run.output.find("missing frame 3"), std::string::npos) << run.output;
+  EXPECT_EQ(OutputFiles(), 0u);
+  const RunResult ok = Execute(Sim() + " -o " + Out() + " --frames 1-2");
+  EXPECT_EQ(ok.code, 0) << ok.output;
+  EXPECT_FALSE(fs::exists(rime::io::FramePath(Out(), "ice", 4, "obj")));
+}
+
+TEST_F(Cli, FrameWithoutIceGivesEmptyValidOutputsAndAWarning) {
+  rime::io::WriteParticleFrame(Frame(5), MakeFrame(5, false));
+  const RunResult run = Execute(Frame(5).string() + " -o " + Out());
+  ASSERT_EQ(run.code, 0) << run.output;
+  EXPECT_NE(run.output.find("no ice particles"), std::string::npos) << run.output;
+  EXPECT_TRUE(fs::exists(rime::io::FramePath(Out(), "ice", 5, "vdb")));
+  EXPECT_TRUE(rime::io::ReadMesh(rime::io::FramePath(Out(), "ice", 5, "obj")).empty());
+}
+
+TEST_F(Cli, MissingAnisotropyFallsBackOrFailsUnderStrict) {
+  rime::io::WriteParticleFrame(Frame(1), MakeFrame(1, true, false));
+  const RunResult strict = Execute(Frame(1).string() + " -o " + Out() + " --strict");
+  EXPECT_EQ(strict.code, 3) << strict.output;
+  EXPECT_NE(strict.output.find("anisotropy"), std::string::npos) << strict.output;
+  EXPECT_EQ(OutputFiles(), 0u);
+  const RunResult lenient = Execute(Frame(1).string() + " -o " + Out());
+  EXPECT_EQ(lenient.code, 0) << lenient.output;
+  EXPECT_NE(lenient.output.find("isotropic"), std::string::npos) << lenient.output;
+}
+
+TEST_F(Cli, RefusesNewerFormatVersionAndMemoryBudget) {
+  rime::io::WriteParticleFrame(Frame(1), MakeFrame(1, true));
+  const RunResult budget = Execute(Frame(1).string() + " -o " + Out() + " --memory-budget 0.00001");
+  EXPECT_EQ(budget.code, 3) << budget.output;
+  EXPECT_NE(budget.output.find("estimated peak memory"), std::string::npos) << budget.output;
+  EXPECT_EQ(OutputFiles(), 0u);
+  // Pretend a newer Rime wrote the frame.
+  const hid_t file = H5Fopen(Frame(1).c_str(), H5F_ACC_RDWR, H5P_DEFAULT);
+  ASSERT_GE(file, 0);
+  const hid_t attr = H5Aopen(file, "version", H5P_DEFAULT);
+  ASSERT_GE(attr, 0);
+  const double version = 99;
+  H5Awrite(attr, H5T_NATIVE_DOUBLE, &version);
+  H5Aclose(attr);
+  H5Fclose(file);
+  const RunResult newer = Execute(Frame(1).string() + " -o " + Out());
+  EXPECT_EQ(newer.code, 3) << newer.output;
+  EXPECT_NE(newer.output.find("newer"), std::string::npos) << newer.output;
+  EXPECT_EQ(OutputFiles(), 0u);
+  const RunResult missing = Execute((dir_ / "nope.0001.h5part").string() + " -o " + Out());
+  EXPECT_EQ(missing.code, 3) << missing.output;
+}
+
+}  // namespace
