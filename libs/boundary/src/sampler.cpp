@@ -175,55 +175,69 @@ SurfaceSamples SampleSurface(const io::TriMesh& mesh, const SampleOptions& optio
     const bool repeated = tris[t][0] == tris[t][1] || tris[t][1] == tris[t][2] || tris[t][0] == tris[t][2];
     valid[t] = !repeated && Norm(area_vectors[t]) > 1e-10 * longest;  // zero area up to round-off
   });
-  std::vector<Vec3d> vertex_normal_sum(nw, Vec3d(0, 0, 0)), vertex_fallback(nw, Vec3d(0, 0, 0));
-  std::vector<std::uint8_t> used(nw, 0);
   std::size_t valid_count = 0;
-  for (std::size_t t = 0; t < nt; ++t) {
-    if (!valid[t]) continue;
-    ++valid_count;
-    for (std::uint32_t v : tris[t]) {
-      vertex_normal_sum[v] += area_vectors[t];
-      vertex_fallback[v] = area_vectors[t];
-      used[v] = 1;
-    }
-  }
+  for (std::size_t t = 0; t < nt; ++t) valid_count += valid[t];
   stats.degenerate_skipped = nt - valid_count;
   if (valid_count == 0)
     throw InputError(fmt::format("all {} triangles are degenerate (zero area)", nt), options.source);
 
-  phase("triangles + vertex normals");
-  // 3. Distinct edges: radix-sort the (low, high) vertex pairs of every valid triangle; invalid
-  // triangles get a key above every real one and are cut off after the sort.
-  const exec::Device cpu = exec::Device::Cpu();
-  const int vertex_bits = std::max(1, int(std::bit_width(std::uint64_t(nw))));
-  const std::uint64_t past_last = (std::uint64_t(nw - 1) << vertex_bits) | std::uint64_t(nw - 1);
-  std::vector<std::uint64_t> edge_keys(3 * nt);
-  std::vector<std::uint32_t> edge_faces(3 * nt);
-  exec::cpu::ParallelFor(Index(nt), [&](Index t) {
-    for (int k = 0; k < 3; ++k) {
-      const std::uint64_t a = tris[t][k], b = tris[t][(k + 1) % 3];
-      edge_keys[3 * t + k] = valid[t] ? (std::min(a, b) << vertex_bits | std::max(a, b)) : past_last;
-      edge_faces[3 * t + k] = static_cast<std::uint32_t>(t);
+  // Valid triangles around every welded vertex (CSR), so that vertex normals and edges are found
+  // per vertex in parallel without sorting.
+  std::vector<std::uint32_t> incident_offset(nw + 1, 0);
+  for (std::size_t t = 0; t < nt; ++t)
+    if (valid[t])
+      for (std::uint32_t v : tris[t]) ++incident_offset[v + 1];
+  for (std::size_t v = 0; v < nw; ++v) incident_offset[v + 1] += incident_offset[v];
+  std::vector<std::uint32_t> incident(incident_offset[nw]), cursor(incident_offset.begin(), incident_offset.end() - 1);
+  for (std::size_t t = 0; t < nt; ++t)
+    if (valid[t])
+      for (std::uint32_t v : tris[t]) incident[cursor[v]++] = static_cast<std::uint32_t>(t);
+  std::vector<std::uint32_t>().swap(cursor);
+  phase("triangles + incidence");
+
+  // 3. Vertex normals (area-weighted) and distinct edges (a, b > a) with their faces' area vectors,
+  // in two passes over the vertices: count, then fill at scanned offsets.
+  std::vector<Vec3f> vertex_normals(nw);
+  std::vector<std::uint64_t> vertex_edge_offset(nw + 1, 0);
+  const auto edges_of = [&](std::uint32_t a, std::vector<Edge>& local) {
+    local.clear();
+    for (std::uint32_t k = incident_offset[a]; k < incident_offset[a + 1]; ++k) {
+      const std::uint32_t t = incident[k];
+      for (std::uint32_t b : tris[t]) {
+        if (b <= a) continue;
+        Edge* found = nullptr;
+        for (Edge& e : local)
+          if (e.b == b) found = &e;
+        if (found) found->normal_sum += area_vectors[t];
+        else local.push_back({a, b, area_vectors[t], area_vectors[t]});
+      }
     }
+  };
+  exec::cpu::ParallelFor(Index(nw), [&](Index a) {
+    Vec3d sum(0, 0, 0), fallback(0, 0, 0);
+    for (std::uint32_t k = incident_offset[a]; k < incident_offset[a + 1]; ++k) {
+      sum += area_vectors[incident[k]];
+      fallback = area_vectors[incident[k]];
+    }
+    vertex_normals[a] = UnitOr(sum, fallback);
+    thread_local std::vector<Edge> local;
+    edges_of(std::uint32_t(a), local);
+    vertex_edge_offset[a] = local.size();
   });
-  exec::SortPairs(cpu, edge_keys.data(), edge_faces.data(), Index(edge_keys.size()), 2 * vertex_bits);
-  edge_keys.resize(3 * valid_count);
-  std::vector<Edge> edges;
-  for (std::size_t k = 0; k < edge_keys.size(); ++k) {
-    const Vec3d& n = area_vectors[edge_faces[k]];
-    if (k == 0 || edge_keys[k] != edge_keys[k - 1])
-      edges.push_back({std::uint32_t(edge_keys[k] >> vertex_bits), std::uint32_t(edge_keys[k] & ((1ull << vertex_bits) - 1)), n, n});
-    else
-      edges.back().normal_sum += n;
-  }
+  std::exclusive_scan(vertex_edge_offset.begin(), vertex_edge_offset.end(), vertex_edge_offset.begin(), std::uint64_t(0));
+  std::vector<Edge> edges(vertex_edge_offset[nw]);
+  exec::cpu::ParallelFor(Index(nw), [&](Index a) {
+    thread_local std::vector<Edge> local;
+    edges_of(std::uint32_t(a), local);
+    std::copy(local.begin(), local.end(), edges.begin() + std::ptrdiff_t(vertex_edge_offset[a]));
+  });
   stats.edges = edges.size();
-  std::vector<std::uint64_t>().swap(edge_keys);
 
   phase("edges");
   // 4. Count, check the total, then fill in parallel at scanned offsets.
   std::vector<std::uint32_t> used_vertices;
   for (std::size_t v = 0; v < nw; ++v)
-    if (used[v]) used_vertices.push_back(std::uint32_t(v));
+    if (incident_offset[v + 1] > incident_offset[v]) used_vertices.push_back(std::uint32_t(v));
   stats.welded_vertices = used_vertices.size();
   std::vector<std::uint64_t> edge_offset(edges.size() + 1, 0), face_offset(nt + 1, 0);
   exec::cpu::ParallelFor(Index(edges.size()), [&](Index e) {
@@ -248,7 +262,7 @@ SurfaceSamples SampleSurface(const io::TriMesh& mesh, const SampleOptions& optio
   exec::cpu::ParallelFor(Index(used_vertices.size()), [&](Index i) {
     const std::uint32_t v = used_vertices[i];
     positions[i] = Vec3f(welded_positions[v]);
-    normals[i] = UnitOr(vertex_normal_sum[v], vertex_fallback[v]);
+    normals[i] = vertex_normals[v];
   });
   exec::cpu::ParallelFor(Index(edges.size()), [&](Index e) {
     const Edge& edge = edges[e];
@@ -279,7 +293,7 @@ SurfaceSamples SampleSurface(const io::TriMesh& mesh, const SampleOptions& optio
     // parallel, one grid cell at a time (its neighbour cells are looked up once for all of its
     // particles), then run the greedy rule over those alone.
     const float radius = float(kDuplicateRadius * d), radius2 = radius * radius;
-    neighbors::UniformGrid<float> grid(cpu);
+    neighbors::UniformGrid<float> grid(exec::Device::Cpu());
     grid.Build(positions.data(), Index(total), float(2 * d));  // a few particles per cell on a surface
     const neighbors::GridView<float> view = grid.view();
     std::vector<std::uint8_t> has_earlier(total, 0), keep(total, 1);
