@@ -72,9 +72,15 @@ struct Runner::Impl {
 
   fs::path Marker(const Job& job) const { return runner.layout_.state_folder() / "incomplete" / job.id; }
 
-  void Save() {
+  // The state is rewritten at most every couple of seconds (it lists every file, so saving after
+  // each of thousands of frame jobs would be quadratic) and at the end. A job whose record was not
+  // saved yet simply reruns after a crash: its key is unknown, so it counts as never built.
+  Clock::time_point last_save{};
+  void Save(bool now) {
     std::lock_guard lock(save_mutex);
+    if (!now && Clock::now() - last_save < std::chrono::seconds(2)) return;
     runner.state_.Save();
+    last_save = Clock::now();
   }
 
   void Fail(const Job& job, int exit_code, std::string message) {
@@ -162,7 +168,7 @@ struct Runner::Impl {
     for (const auto& output : job.optional_outputs)
       if (const auto hash = runner.state_.ContentHash(output)) record.outputs[runner.state_.Name(output)] = *hash;
     runner.state_.SetRecord(job.id, std::move(record));
-    Save();
+    Save(job.exclusive);  // the simulation's record is saved at once: losing it would mean a full rerun
     std::error_code ec;
     fs::remove(marker, ec);
     std::lock_guard lock(mutex);
@@ -414,6 +420,7 @@ BakeResult Runner::Run() {
   lock.unlock();
   for (auto& t : threads)
     if (t.joinable()) t.join();
+  impl.Save(true);
   progress.Finish();
   if (impl.result.exit_code == 0 && Interrupted()) {
     impl.result.exit_code = static_cast<int>(ExitCode::kInterrupted);

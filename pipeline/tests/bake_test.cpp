@@ -400,6 +400,23 @@ TEST_F(Bake, SecondBakeIntoTheSameFolderIsRefused) {
   EXPECT_EQ(RunBake(), 0) << output_;
 }
 
+TEST_F(Bake, CorruptStateRebuildsEverythingWithAWarning) {
+  ASSERT_EQ(RunBake(), 0) << output_;
+  WriteFile(Out() / "cache/.rime-bake/state.json", "{ not json");
+  ASSERT_EQ(RunBake(), 0) << output_;
+  EXPECT_NE(output_.find("ignoring corrupt state file"), std::string::npos) << output_;
+  EXPECT_EQ(Invocations(), kEverything) << output_;
+}
+
+TEST_F(Bake, MissingStageToolIsNamedAndOnlyNeededForItsStage) {
+  fs::remove(root_ / "tools/rime-clean");
+  EXPECT_EQ(RunBake(), 3) << output_;
+  EXPECT_NE(output_.find("stage tool rime-clean not found"), std::string::npos) << output_;
+  EXPECT_TRUE(Invocations().empty());
+  EXPECT_EQ(RunBake("surface"), 0) << output_;
+  EXPECT_EQ(Invocations()["rime-surface"], kLastFrame + 1) << output_;
+}
+
 TEST_F(Bake, BadBakeTableNamesFileLineAndField) {
   const std::string text = ReadFile(scene_) + "[bake]\npreview_widht = 640\n";
   WriteFile(scene_, text);
