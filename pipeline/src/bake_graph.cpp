@@ -127,7 +127,23 @@ std::vector<Job> BuildGraph(const SceneDocument& doc, const BakeLayout& layout, 
     if (options.cpu_threads > 0) args.insert(args.end(), {"-j", std::to_string(options.cpu_threads)});
   };
 
-  // 3-5. Per frame: surface → cleanup → preview render.
+  // 3-5. Per frame: surface → cleanup → preview render. What rime-surface writes follows the
+  // scene's [surface] phase ("ice", "water", "both") and formats (obj, ply, vdb).
+  const io::SurfaceSettings& surfacing = scene.surface;
+  std::vector<std::string> phases;
+  if (surfacing.phase != "water") phases.push_back("ice");
+  if (surfacing.phase != "ice") phases.push_back("water");
+  const auto has_format = [&](const char* ext) {
+    return std::find(surfacing.formats.begin(), surfacing.formats.end(), ext) != surfacing.formats.end();
+  };
+  // The cleanup cleans the ice mesh (the water mesh when only water is surfaced), read as OBJ when
+  // the surface writes OBJ, else PLY.
+  const std::string cleaned_phase = phases.front();
+  const char* mesh_format = has_format("obj") ? "obj" : "ply";
+  if (target >= Stage::kCleanup && !has_format("obj") && !has_format("ply"))
+    throw InputError("[surface] formats has no mesh format (obj or ply), so the cleanup stage has nothing to clean; add \"obj\" or "
+                     "bake only up to the surface stage",
+                     scene_path + ": surface.formats");
   const fs::path preview_data = layout.cache() / "preview";
   const bool preview = target == Stage::kPreview && options.blender.has_value();
   for (std::int64_t f = first; f <= last; ++f) {
@@ -141,25 +157,25 @@ std::vector<Job> BuildGraph(const SceneDocument& doc, const BakeLayout& layout, 
     surface.args = {particles.string(), "-o", layout.surface().string(), "--scene", scene_path};
     surface.inputs = {particles};
     surface.dependencies = {"sim"};
-    for (const char* ext : {"vdb", "obj", "ply"}) {
-      surface.outputs.push_back(io::FramePath(layout.surface(), "ice", f, ext));
-      surface.optional_outputs.push_back(io::FramePath(layout.surface(), "water", f, ext));
-    }
+    for (const auto& phase : phases)
+      for (const char* ext : {"vdb", "obj", "ply"})
+        if (has_format(ext)) surface.outputs.push_back(io::FramePath(layout.surface(), phase, f, ext));
     add(surface);
     frame_threads(jobs.back().args);
     if (target == Stage::kSurface) continue;
 
-    const fs::path ice_mesh = io::FramePath(layout.surface(), "ice", f, "obj");
+    const fs::path mesh = io::FramePath(layout.surface(), cleaned_phase, f, mesh_format);
+    const std::string cleaned = cleaned_phase + "_clean";
     Job cleanup;
     cleanup.stage = Stage::kCleanup;
     cleanup.frame = f;
     cleanup.id = "cleanup." + Padded(f);
     cleanup.tool_name = "rime-clean";
     cleanup.program = RequireTool(options, cleanup.tool_name);
-    cleanup.args = {ice_mesh.string(), "-o", layout.clean().string(), "--scene", scene_path};
-    cleanup.inputs = {ice_mesh};
+    cleanup.args = {mesh.string(), "-o", layout.clean().string(), "--scene", scene_path};
+    cleanup.inputs = {mesh};
     cleanup.dependencies = {surface.id};
-    for (const char* ext : {"obj", "ply", "json"}) cleanup.outputs.push_back(io::FramePath(layout.clean(), "ice_clean", f, ext));
+    for (const char* ext : {"obj", "ply", "json"}) cleanup.outputs.push_back(io::FramePath(layout.clean(), cleaned, f, ext));
     add(cleanup);
     frame_threads(jobs.back().args);
     if (!preview) continue;
@@ -170,7 +186,7 @@ std::vector<Job> BuildGraph(const SceneDocument& doc, const BakeLayout& layout, 
     render.id = "preview." + Padded(f);
     render.tool_name = "blender";
     render.program = *options.blender;
-    const fs::path clean_mesh = io::FramePath(layout.clean(), "ice_clean", f, "obj");
+    const fs::path clean_mesh = io::FramePath(layout.clean(), cleaned, f, "obj");
     const fs::path water_mesh = io::FramePath(layout.surface(), "water", f, "obj");
     const fs::path image = io::FramePath(layout.preview(), "frame", f, "png");
     render.args = {"--background", "--factory-startup", "-noaudio", "--python", (preview_data / "render_preview.py").string(), "--",

@@ -33,7 +33,6 @@ struct Job {
   std::vector<std::filesystem::path> inputs;           // must exist; their content is part of the key
   std::vector<std::filesystem::path> optional_inputs;  // part of the key when present (water meshes)
   std::vector<std::filesystem::path> outputs;          // must exist after success
-  std::vector<std::filesystem::path> optional_outputs; // recorded when the tool wrote them
   std::vector<std::string> dependencies;               // ids of jobs that produce the inputs
   std::filesystem::path log;
   bool exclusive = false;  // runs alone (the simulation uses every core itself)

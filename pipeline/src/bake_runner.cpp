@@ -165,8 +165,6 @@ struct Runner::Impl {
       }
       record.outputs[runner.state_.Name(output)] = *hash;
     }
-    for (const auto& output : job.optional_outputs)
-      if (const auto hash = runner.state_.ContentHash(output)) record.outputs[runner.state_.Name(output)] = *hash;
     runner.state_.SetRecord(job.id, std::move(record));
     Save(job.exclusive);  // the simulation's record is saved at once: losing it would mean a full rerun
     std::error_code ec;
@@ -222,13 +220,6 @@ Verdict Runner::Evaluate(const Job& job) {
     if (!hash) v.reasons.push_back(fmt::format("output {} is missing", output.string()));
     else if (recorded != record->outputs.end() && recorded->second != *hash)
       v.reasons.push_back(fmt::format("output {} was changed after it was written", output.string()));
-  }
-  for (const auto& output : job.optional_outputs) {
-    const auto recorded = record->outputs.find(state_.Name(output));
-    if (recorded == record->outputs.end()) continue;
-    const auto hash = state_.ContentHash(output);
-    if (!hash) v.reasons.push_back(fmt::format("output {} is missing", output.string()));
-    else if (recorded->second != *hash) v.reasons.push_back(fmt::format("output {} was changed after it was written", output.string()));
   }
   return v;
 }

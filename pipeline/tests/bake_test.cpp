@@ -188,6 +188,27 @@ TEST_F(Bake, ChangingACleanupParameterRerunsCleanupOnly) {
   EXPECT_NE(output_.find("scene section [cleanup] changed"), std::string::npos) << output_;
 }
 
+TEST_F(Bake, SurfaceOutputsFollowTheSurfacePhaseAndFormats) {
+  WriteFile(scene_, ReadFile(scene_) + "\n[surface]\nphase = \"both\"\nformats = [\"obj\", \"vdb\"]\n");
+  ASSERT_EQ(RunBake(), 0) << output_;
+  ASSERT_TRUE(fs::exists(Out() / "surface/water.0001.obj"));
+  fs::remove(Out() / "surface/water.0001.obj");  // a tracked output: its job reruns
+  ASSERT_EQ(RunBake("--explain"), 0) << output_;
+  EXPECT_EQ(Invocations(), (Counts{{"rime-surface", 1}})) << output_;
+  EXPECT_NE(output_.find("water.0001.obj is missing"), std::string::npos) << output_;
+  fs::remove(Out() / "surface/ice.0002.ply");  // not among the formats: not an output
+  ASSERT_EQ(RunBake(), 0) << output_;
+  EXPECT_TRUE(Invocations().empty()) << output_;
+
+  WriteFile(scene_, ReadFile(scene_) + "\n[bake]\n");  // no mesh format at all cannot be cleaned
+  std::string text = ReadFile(scene_);
+  text.replace(text.find("formats = [\"obj\", \"vdb\"]"), 24, "formats = [\"vdb\"]");
+  WriteFile(scene_, text);
+  EXPECT_EQ(RunBake(), 3) << output_;
+  EXPECT_NE(output_.find("surface.formats"), std::string::npos) << output_;
+  EXPECT_EQ(RunBake("surface"), 0) << output_;
+}
+
 TEST_F(Bake, RerunWithIdenticalOutputCutsOffDownstream) {
   ASSERT_EQ(RunBake(), 0) << output_;
   // The simulation section changes (the fake sim ignores omega): the sim reruns, writes the same

@@ -50,8 +50,13 @@ input=$1; out=$3; scene=$5
 frame=$(basename "$input" | sed -E 's/particles\.([0-9]+)\.h5part/\1/')
 if fail_here surface $((10#$frame)); then echo "rime-surface: error: no particles in frame (fake) ($input)" >&2; exit 3; fi
 mkdir -p "$out"
-for ext in vdb obj ply; do
-  { cat "$input"; section surface "$scene"; echo "$ext"; } > "$out/ice.$frame.$ext.tmp"; mv "$out/ice.$frame.$ext.tmp" "$out/ice.$frame.$ext"
+phases=ice
+if section surface "$scene" | grep -q 'phase *= *"both"'; then phases="ice water"; fi
+for phase in $phases; do
+  for ext in vdb obj ply; do
+    { echo "$phase"; cat "$input"; section surface "$scene"; echo "$ext"; } > "$out/$phase.$frame.$ext.tmp"
+    mv "$out/$phase.$frame.$ext.tmp" "$out/$phase.$frame.$ext"
+  done
 done
 )SH";
 
