@@ -94,43 +94,40 @@ PreparedParticles Prepare(const ParticleSet& particles, const Settings& settings
   exec::cpu::ParallelFor(Index(n), [&](Index i) {
     anisotropy::CovarianceAccumulator<float> acc;
     acc.AddSelf(kernel.W0());
-    if (need_neighbors)
+    if (need_pca) {
       view.ForEachNeighbor(local[i], support, [&](std::uint32_t j, const Vec3f& r, float) {
         if (j != std::uint32_t(i)) acc.Add(-r, kernel.W(Norm(r)));
       });
+    } else if (need_neighbors) {
+      // Centre smoothing needs only the weighted mean: skip the second moments.
+      view.ForEachNeighbor(local[i], support, [&](std::uint32_t j, const Vec3f& r, float) {
+        if (j == std::uint32_t(i)) return;
+        const float w = kernel.W(Norm(r));
+        acc.weight_sum += w;
+        acc.first -= r * w;
+        ++acc.neighbors;
+      });
+    }
     const Vec3f mean_offset = acc.MeanOffset();
     // Centre smoothing (Yu & Turk): x̄ = (1 − λ) x + λ x̄^w.
     out.centers[i] = local[i] + mean_offset * float(settings.lambda);
     out.interior[i] = acc.neighbors >= 0.9 * full_count && Norm(mean_offset) < 0.1 * spacing;
     if (!anisotropic) return;
 
-    Mat3<double> D;
+    // D = R diag(1/s) Rᵀ: stretches below the floor are raised (and a non-positive stored D repaired).
+    anisotropy::Anisotropy<float> a;
     if (stored) {
-      double c[6];
-      for (int k = 0; k < 6; ++k) c[k] = particles.stored_anisotropy[i][k];
-      D = anisotropy::FromComponents(c);
+      const auto& c = particles.stored_anisotropy[i];
+      Vec3f inv_s;
+      SymmetricEigen(anisotropy::FromComponents(c.data()), inv_s, a.rotation);
+      for (int k = 0; k < 3; ++k) a.stretch[k] = inv_s[k] > 0 ? 1.0f / inv_s[k] : 1.0f;
     } else {
-      const auto a = anisotropy::Compute(acc.Covariance(params.center_on_particle), acc.neighbors, float(h), params);
-      Mat3<float> d = a.D();
-      for (int r = 0; r < 3; ++r)
-        for (int c = 0; c < 3; ++c) D.m[r][c] = d.m[r][c];
+      a = anisotropy::Compute(acc.Covariance(params.center_on_particle), acc.neighbors, float(h), params);
     }
-    // D = R diag(1/s) Rᵀ: raise stretches below the floor (and repair a non-positive stored D).
-    Vec3d inv_s;
-    Mat3<double> rot;
-    SymmetricEigen(D, inv_s, rot);
-    anisotropy::Anisotropy<double> a;
-    a.rotation = rot;
-    for (int k = 0; k < 3; ++k) {
-      double s = inv_s[k] > 0 ? 1.0 / inv_s[k] : 1.0;
-      a.stretch[k] = std::max(s, s_floor);
-    }
-    const Mat3<double> fixed = a.D();
-    double c[6];
-    anisotropy::ToComponents(fixed, c);
-    for (int k = 0; k < 6; ++k) out.D[i][k] = float(c[k]);
-    out.min_stretch[i] = float(std::min({a.stretch.x, a.stretch.y, a.stretch.z}));
-    out.max_stretch[i] = float(std::max({a.stretch.x, a.stretch.y, a.stretch.z}));
+    for (int k = 0; k < 3; ++k) a.stretch[k] = std::max(a.stretch[k], float(s_floor));
+    anisotropy::ToComponents(a.D(), out.D[i].data());
+    out.min_stretch[i] = std::min({a.stretch.x, a.stretch.y, a.stretch.z});
+    out.max_stretch[i] = std::max({a.stretch.x, a.stretch.y, a.stretch.z});
   });
   return out;
 }

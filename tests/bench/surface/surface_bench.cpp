@@ -1,0 +1,218 @@
+// rime-surface benchmark: particles per second and peak memory for 50k / 500k / 2M ice particles at
+// voxel = spacing / 2, anisotropic ellipsoids (stored D), against OpenVDB's isotropic
+// ParticlesToLevelSet + volumeToMesh on the same particles.
+//
+// Usage: rime_surface_bench [--sizes 50000,500000,2000000] [--runs 3] [--openvdb] [--json FILE]
+// Peak memory is measured in a child process per case (fork), so cases do not inherit each
+// other's peaks.
+#include <openvdb/openvdb.h>
+#include <openvdb/tools/ParticlesToLevelSet.h>
+#include <openvdb/tools/VolumeToMesh.h>
+#include <sys/resource.h>
+#include <sys/wait.h>
+#include <tbb/global_control.h>
+#include <tbb/info.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "rime/surface/reconstruct.h"
+
+using namespace rime;
+using Clock = std::chrono::steady_clock;
+
+namespace {
+
+constexpr double kSpacing = 0.02;
+
+// A jittered lattice ball of about n particles (a dense ice body), D from the PCA as stored at freezing.
+surface::ParticleSet IceBall(std::size_t n) {
+  surface::ParticleSet set;
+  set.spacing = kSpacing;
+  const double radius = std::cbrt(3.0 * double(n) / (4 * M_PI)) * kSpacing;
+  const int half = int(std::ceil(radius / kSpacing));
+  std::mt19937 rng(42);
+  std::uniform_real_distribution<double> jitter(-0.05, 0.05);
+  for (int i = -half; i <= half; ++i)
+    for (int j = -half; j <= half; ++j)
+      for (int k = -half; k <= half; ++k) {
+        const Vec3d p = Vec3d(i, j, k) * kSpacing;
+        if (Norm(p) <= radius) set.positions.push_back(p + Vec3d(jitter(rng), jitter(rng), jitter(rng)) * kSpacing);
+      }
+  surface::Settings settings;
+  settings.lambda = 0;
+  const surface::PreparedParticles prepared = surface::Prepare(set, settings, kSpacing / 2);
+  set.stored_anisotropy = prepared.D;
+  return set;
+}
+
+struct OpenVdbParticles {
+  const std::vector<Vec3d>* p;
+  double radius;
+  using PosType = openvdb::Vec3R;
+  std::size_t size() const { return p->size(); }
+  void getPos(std::size_t n, openvdb::Vec3R& xyz) const { xyz = openvdb::Vec3R((*p)[n].x, (*p)[n].y, (*p)[n].z); }
+  void getPosRad(std::size_t n, openvdb::Vec3R& xyz, openvdb::Real& rad) const {
+    getPos(n, xyz);
+    rad = radius;
+  }
+};
+
+double CpuSeconds() {
+  rusage usage{};
+  getrusage(RUSAGE_SELF, &usage);
+  return usage.ru_utime.tv_sec + usage.ru_stime.tv_sec + 1e-6 * (usage.ru_utime.tv_usec + usage.ru_stime.tv_usec);
+}
+
+struct Measure {
+  double seconds = 0, rasterize = 0, mesh = 0, cpu_seconds = 0;
+  std::uint64_t triangles = 0, active_voxels = 0;
+};
+
+Measure RunRime(const surface::ParticleSet& set) {
+  surface::Settings settings;  // spec defaults: ellipsoids, λ = 0.9, voxel = d_p / 2
+  const auto t0 = Clock::now();
+  const surface::Result r = surface::Reconstruct(set, settings);
+  Measure m;
+  m.seconds = std::chrono::duration<double>(Clock::now() - t0).count();
+  m.rasterize = r.stats.seconds_prepare + r.stats.seconds_rasterize;
+  m.mesh = r.stats.seconds_mesh;
+  m.triangles = r.stats.triangles;
+  m.active_voxels = r.stats.active_voxels;
+  return m;
+}
+
+Measure RunOpenVdb(const surface::ParticleSet& set) {
+  openvdb::initialize();
+  const auto t0 = Clock::now();
+  const double dx = kSpacing / 2;
+  auto grid = openvdb::createLevelSet<openvdb::FloatGrid>(dx, 3.0);
+  openvdb::tools::ParticlesToLevelSet<openvdb::FloatGrid> raster(*grid);
+  raster.setGrainSize(1);
+  OpenVdbParticles particles{&set.positions, kSpacing};  // radius = spacing, as in LIBRARY_NOTES.md
+  raster.rasterizeSpheres(particles);
+  raster.finalize(true);
+  Measure m;
+  m.rasterize = std::chrono::duration<double>(Clock::now() - t0).count();
+  std::vector<openvdb::Vec3s> points;
+  std::vector<openvdb::Vec3I> triangles;
+  std::vector<openvdb::Vec4I> quads;
+  openvdb::tools::volumeToMesh(*grid, points, triangles, quads, 0.0, 0.0);
+  m.seconds = std::chrono::duration<double>(Clock::now() - t0).count();
+  m.mesh = m.seconds - m.rasterize;
+  m.triangles = triangles.size() + 2 * quads.size();
+  m.active_voxels = grid->activeVoxelCount();
+  return m;
+}
+
+// Runs `body` in a child process; returns its measure and peak resident memory.
+template <class F>
+bool Isolated(F body, Measure& out, std::uint64_t& peak) {
+  int fd[2];
+  if (pipe(fd) != 0) return false;
+  const pid_t pid = fork();
+  if (pid == 0) {
+    close(fd[0]);
+    const double cpu0 = CpuSeconds();
+    Measure m = body();
+    m.cpu_seconds = CpuSeconds() - cpu0;
+    rusage usage{};
+    getrusage(RUSAGE_SELF, &usage);
+    const std::uint64_t bytes = std::uint64_t(usage.ru_maxrss) * 1024;
+    (void)!write(fd[1], &m, sizeof m);
+    (void)!write(fd[1], &bytes, sizeof bytes);
+    _exit(0);
+  }
+  close(fd[1]);
+  bool ok = read(fd[0], &out, sizeof out) == sizeof out && read(fd[0], &peak, sizeof peak) == sizeof peak;
+  close(fd[0]);
+  int status = 0;
+  waitpid(pid, &status, 0);
+  return ok && WIFEXITED(status) && WEXITSTATUS(status) == 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  std::vector<std::size_t> sizes{50000, 500000, 2000000};
+  int runs = 3;
+  bool openvdb_baseline = false;
+  std::string json_path = "surface_bench.json";
+  for (int a = 1; a < argc; ++a) {
+    const std::string arg = argv[a];
+    if (arg == "--sizes" && a + 1 < argc) {
+      sizes.clear();
+      std::string list = argv[++a];
+      for (std::size_t pos = 0; pos != std::string::npos;) {
+        const std::size_t comma = list.find(',', pos);
+        sizes.push_back(std::stoull(list.substr(pos, comma == std::string::npos ? comma : comma - pos)));
+        pos = comma == std::string::npos ? comma : comma + 1;
+      }
+    } else if (arg == "--runs" && a + 1 < argc) {
+      runs = std::stoi(argv[++a]);
+    } else if (arg == "--openvdb") {
+      openvdb_baseline = true;
+    } else if (arg == "--json" && a + 1 < argc) {
+      json_path = argv[++a];
+    } else {
+      std::fprintf(stderr, "usage: %s [--sizes N,N,...] [--runs R] [--openvdb] [--json FILE]\n", argv[0]);
+      return 2;
+    }
+  }
+  const int threads = tbb::info::default_concurrency();
+  nlohmann::json results = nlohmann::json::array();
+  std::printf("threads: %d, voxel = spacing/2, shape: jittered ice ball, median of %d runs (by wall time); M/cpu-s = particles per CPU-second (user+sys, robust to a shared machine)\n", threads, runs);
+  std::printf("%-24s %10s %9s %9s %9s %9s %10s %12s %11s %10s\n", "method", "particles", "wall s", "field s", "mesh s", "cpu s",
+              "M part/s", "M/cpu-s", "triangles", "peak MB");
+  for (std::size_t n : sizes) {
+    const surface::ParticleSet set = IceBall(n);
+    for (int method = 0; method < (openvdb_baseline ? 2 : 1); ++method) {
+      std::vector<Measure> measures;
+      std::uint64_t peak = 0;
+      for (int r = 0; r < runs; ++r) {
+        Measure m;
+        std::uint64_t p = 0;
+        if (!Isolated([&] { return method == 0 ? RunRime(set) : RunOpenVdb(set); }, m, p)) {
+          std::fprintf(stderr, "case failed\n");
+          return 1;
+        }
+        measures.push_back(m);
+        peak = std::max(peak, p);
+      }
+      std::sort(measures.begin(), measures.end(), [](const Measure& a, const Measure& b) { return a.seconds < b.seconds; });
+      const Measure& m = measures[measures.size() / 2];
+      const char* name = method == 0 ? "rime ellipsoids (aniso)" : "openvdb P2LS (iso)";
+      const double rate = double(set.size()) / m.seconds / 1e6;
+      const double cpu_rate = double(set.size()) / m.cpu_seconds / 1e6;
+      std::printf("%-24s %10zu %9.3f %9.3f %9.3f %9.3f %10.3f %12.3f %11llu %10.0f\n", name, set.size(), m.seconds, m.rasterize,
+                  m.mesh, m.cpu_seconds, rate, cpu_rate, (unsigned long long)m.triangles, peak / 1e6);
+      std::fflush(stdout);
+      results.push_back({{"method", name},
+                         {"particles", set.size()},
+                         {"threads", threads},
+                         {"seconds_median", m.seconds},
+                         {"seconds_field", m.rasterize},
+                         {"seconds_mesh", m.mesh},
+                         {"particles_per_second", rate * 1e6},
+                         {"particles_per_second_per_core", rate * 1e6 / threads},
+                         {"cpu_seconds", m.cpu_seconds},
+                         {"particles_per_cpu_second", cpu_rate * 1e6},
+                         {"triangles", m.triangles},
+                         {"active_voxels", m.active_voxels},
+                         {"peak_memory_bytes", peak},
+                         {"note", "peak memory includes the generated particle set (~100 bytes/particle)"}});
+    }
+  }
+  std::ofstream(json_path) << results.dump(2) << "\n";
+  std::printf("wrote %s\n", json_path.c_str());
+  return 0;
+}
