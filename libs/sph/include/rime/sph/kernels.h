@@ -14,6 +14,7 @@
 #include "rime/core/kernel.h"
 #include "rime/core/math.h"
 #include "rime/exec/kernel_list.h"
+#include "rime/freeze/kernels.h"
 #include "rime/neighbors/grid_kernels.h"
 
 namespace rime::sph {
@@ -362,14 +363,17 @@ struct IntegratePressure {
 };
 
 /// Akinci boundary volume V_b = 1/(W0 + Σ_k W_bk) over all boundary particles (spec §3), Ψ_b = ρ0 V_b.
+/// With `list`, only the listed particles are updated (those near a change of the boundary set).
 template <class T>
 struct BoundaryVolume {
   neighbors::GridView<T> grid;
   CubicSpline<T> kernel;
   T rest_density;
+  const std::uint32_t* list;  // nullptr: every boundary particle
   T* volume;
   T* psi;
-  RIME_HD void operator()(Index b) const {
+  RIME_HD void operator()(Index k) const {
+    const std::uint32_t b = list ? list[k] : static_cast<std::uint32_t>(k);
     T sum = kernel.W0();
     const Vec3<T> xb = grid.points[b];
     grid.ForEachNeighbor(xb, kernel.SupportRadius(), [&](std::uint32_t k, const Vec3<T>&, T r2) {
@@ -426,6 +430,16 @@ struct InsideDomain {
   }
 };
 
+/// flags[index[k]] = 1 for every entry of the CSR lists of the given rows (benign races: same value).
+struct MarkListed {
+  const std::uint32_t* offsets;
+  const std::uint32_t* index;
+  std::uint32_t* flags;
+  RIME_HD void operator()(Index i) const {
+    for (std::uint32_t k = offsets[i], e = offsets[i + 1]; k < e; ++k) flags[index[k]] = 1u;
+  }
+};
+
 /// For every kept i: order[slot[i]] = i (slot = exclusive scan of keep): the compaction map.
 struct CompactionOrder {
   const std::uint32_t* keep;
@@ -448,9 +462,9 @@ struct CompactionOrder {
   X(rime::sph::kernels::PredictAdvection<T>) X(rime::sph::kernels::DisplacementSum<T>)                             \
   X(rime::sph::kernels::PressureUpdate<T>) X(rime::sph::kernels::IntegratePressure<T>)                             \
   X(rime::sph::kernels::SquaredSpeed<T>) X(rime::sph::kernels::BoundaryVolume<T>) X(rime::sph::kernels::MoveBoundary<T>) X(rime::sph::kernels::InsideDomain<T>) \
-  X(rime::sph::kernels::Gather<T>) X(rime::sph::kernels::Gather<rime::Vec3<T>>)
+  X(rime::sph::kernels::Gather<T>) X(rime::sph::kernels::Gather<rime::Vec3<T>>) X(rime::sph::kernels::Gather<rime::freeze::Sym6<T>>)
 
 #define RIME_SPH_KERNELS(X)                                                                        \
-  RIME_SPH_KERNELS_T(X, float) RIME_SPH_KERNELS_T(X, double) X(rime::sph::kernels::CompactionOrder) \
+  RIME_SPH_KERNELS_T(X, float) RIME_SPH_KERNELS_T(X, double) X(rime::sph::kernels::CompactionOrder) X(rime::sph::kernels::MarkListed) \
   X(rime::sph::kernels::Gather<std::int64_t>) X(rime::sph::kernels::Gather<std::uint32_t>)          \
   X(rime::sph::kernels::Gather<std::uint8_t>)

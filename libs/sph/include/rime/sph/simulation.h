@@ -17,6 +17,7 @@
 
 #include "rime/core/math.h"
 #include "rime/exec/device.h"
+#include "rime/exec/memory.h"
 #include "rime/io/particles.h"
 #include "rime/io/scene.h"
 #include "rime/sph/modules.h"
@@ -25,8 +26,8 @@ namespace rime::sph {
 
 /// Wall-clock seconds spent in each part of the step (accumulated).
 struct StepTimings {
-  double neighbor_search = 0, non_pressure = 0, pressure_solve = 0, integration = 0, other = 0;
-  double total() const { return neighbor_search + non_pressure + pressure_solve + integration + other; }
+  double neighbor_search = 0, non_pressure = 0, pressure_solve = 0, integration = 0, freezing = 0, other = 0;
+  double total() const { return neighbor_search + non_pressure + pressure_solve + integration + freezing + other; }
 };
 
 struct StepStats {
@@ -40,6 +41,7 @@ struct StepStats {
   std::int64_t fluid_particles = 0;
   std::int64_t removed_particles = 0;  // left the domain during this step
   std::int64_t emitted_particles = 0;
+  std::int64_t frozen_particles = 0;  // converted to ice during this step
 };
 
 template <class T>
@@ -71,6 +73,7 @@ class Simulation {
   std::int64_t fluid_count() const;
   std::int64_t boundary_count() const;
   std::int64_t removed_total() const { return removed_total_; }
+  std::int64_t ice_count() const;
   const ModuleRegistry& modules() const { return modules_; }
   const StepTimings& timings() const { return timings_; }
   void EnableTimings(bool on) { timing_enabled_ = on; }
@@ -105,6 +108,8 @@ class Simulation {
   void RecomputeBoundaryVolumes();
   void ComputeDomain(const std::vector<Vec3<T>>& fluid);
   void CheckDivergence(const StepStats& stats) const;
+  void Freeze(double dt);
+  void ConvertToIce(const exec::DeviceArray<std::uint32_t>& frozen_list, Index frozen, double when);
 
   io::Scene scene_;
   exec::Device device_;

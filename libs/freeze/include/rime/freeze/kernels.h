@@ -1,0 +1,301 @@
+/// @file kernels.h
+/// @brief The paper's anisotropic freezing (spec §8–9) as RIME_HD kernels: fluid PCA, virtual water
+/// film transfer and diffusion, growth direction, freezing fraction, nucleation energy and the
+/// phase-shift decision. All decisions of a step read one snapshot (Jacobi-style), so the set of
+/// frozen particles does not depend on thread order (spec §9.7, T22).
+#pragma once
+
+#include <cstdint>
+
+#include "rime/core/anisotropy.h"
+#include "rime/core/hd.h"
+#include "rime/core/kernel.h"
+#include "rime/core/math.h"
+#include "rime/exec/kernel_list.h"
+#include "rime/neighbors/grid_kernels.h"
+
+namespace rime::freeze {
+
+/// A symmetric 3x3 matrix as six components (xx, yy, zz, xy, xz, yz): the stored anisotropy D.
+template <class T>
+struct Sym6 {
+  T c[6];
+};
+
+enum IceKind : std::uint8_t { kNotIce = 0, kGlaze = 1, kIcicle = 2 };
+
+/// Parameters of the freezing kernels, in the solver's precision.
+template <class T>
+struct FreezeParams {
+  T h, mass, film_max;         // Γ_max (kg)
+  T alpha_solid, alpha_ice;
+  T dt_ref;
+  T glaze_threshold, icicle_threshold;
+  T growth_sign;               // +1 paper, −1 flipped
+  bool fr_clamp;               // fr_mode = "clamp"
+  bool ce_raw;                 // ce_mode = "raw" (kg/m³) instead of dimensionless
+  bool ce_sum;                 // ce_aggregation = "sum"
+  bool isotropic;              // growth = "isotropic" (baseline: G = I/h)
+  anisotropy::Params<T> pca;
+};
+
+namespace kernels {
+
+/// flag[j] = 1 for fluid particles with a boundary neighbor; marks those boundary particles active.
+template <class T>
+struct MarkContacts {
+  const std::uint32_t* fb_offsets;
+  const std::uint32_t* fb_index;
+  std::uint32_t* fluid_flag;
+  std::uint32_t* boundary_active;
+  RIME_HD void operator()(Index j) const {
+    const std::uint32_t begin = fb_offsets[j], end = fb_offsets[j + 1];
+    fluid_flag[j] = begin != end ? 1u : 0u;
+    for (std::uint32_t k = begin; k < end; ++k) boundary_active[fb_index[k]] = 1u;  // benign race: same value
+  }
+};
+
+/// Marks every fluid particle that appears in a boundary particle's fluid list (the B–F lists).
+struct MarkFluidFromBoundary {
+  const std::uint32_t* bf_offsets;
+  const std::uint32_t* bf_index;
+  std::uint32_t* fluid_flag;
+  RIME_HD void operator()(Index k) const {
+    for (std::uint32_t e = bf_offsets[k + 1], m = bf_offsets[k]; m < e; ++m) fluid_flag[bf_index[m]] = 1u;
+  }
+};
+
+/// Fluid anisotropy for flagged particles (spec §8): W-weighted covariance over the fluid
+/// neighbors at the current positions, stretches, and D = R diag(1/s) Rᵀ (G = D/h).
+template <class T>
+struct FluidAnisotropy {
+  const std::uint32_t* flag;
+  const std::uint32_t* ff_offsets;
+  const std::uint32_t* ff_index;
+  const Vec3<T>* x;
+  CubicSpline<T> kernel;
+  FreezeParams<T> params;
+  Sym6<T>* d;
+  RIME_HD void operator()(Index j) const {
+    if (!flag[j]) return;
+    Mat3<T> D = Mat3<T>::Identity();
+    if (!params.isotropic) {
+      anisotropy::CovarianceAccumulator<T> acc;
+      acc.AddSelf(kernel.W0());
+      const Vec3<T> xj = x[j];
+      for (std::uint32_t k = ff_offsets[j], e = ff_offsets[j + 1]; k < e; ++k) {
+        const Vec3<T> r = x[ff_index[k]] - xj;
+        const T w = kernel.W(Norm(r));
+        if (w > T(0)) acc.Add(r, w);
+      }
+      D = anisotropy::Compute(acc.Covariance(params.pca.center_on_particle), acc.neighbors, kernel.h, params.pca).D();
+    }
+    anisotropy::ToComponents(D, d[j].c);
+  }
+};
+
+/// Film transfer (spec §9.2, bounded rate form) and growth direction (spec §9.4) for one active
+/// boundary particle b = active[k] with fluid neighbors bf(k).
+template <class T>
+struct FilmAndGrowth {
+  const std::uint32_t* active;
+  const std::uint32_t* bf_offsets;
+  const std::uint32_t* bf_index;
+  const Vec3<T>* boundary_x;
+  const T* boundary_volume;
+  const std::uint8_t* boundary_phase;  // 1 solid, 2 ice
+  const Vec3<T>* x;
+  const Vec3<T>* v;
+  const Sym6<T>* d;
+  CubicSpline<T> kernel;
+  FreezeParams<T> params;
+  T dt;
+  T* film;  // Γ/Γ_max ∈ [0,1]
+  Vec3<T>* growth;
+  std::uint8_t* growth_valid;
+  RIME_HD void operator()(Index k) const {
+    const std::uint32_t b = active[k];
+    const std::uint32_t begin = bf_offsets[k], end = bf_offsets[k + 1];
+    if (begin == end) return;  // N_f(b) = ∅: keep the film and the last growth direction
+    const Vec3<T> xb = boundary_x[b];
+    T density_sum = T(0);
+    Vec3<T> gv{};
+    const T inv_h = T(1) / params.h;
+    for (std::uint32_t m = begin; m < end; ++m) {
+      const std::uint32_t j = bf_index[m];
+      const Vec3<T> r = xb - x[j];
+      density_sum += params.mass * kernel.W(Norm(r));
+      const Mat3<T> G = anisotropy::FromComponents(d[j].c) * inv_h;
+      gv += v[j] * anisotropy::Kernel(r, G);
+    }
+    const T alpha = boundary_phase[b] == 2 ? params.alpha_ice : params.alpha_solid;
+    const T s = alpha * boundary_volume[b] * density_sum / params.film_max;
+    const T keep = std::pow(T(1) - (s < T(1) ? s : T(1)), dt / params.dt_ref);
+    film[b] = T(1) - (T(1) - film[b]) * keep;
+    gv /= T(end - begin);
+    growth[b] = gv;
+    growth_valid[b] = Norm(gv) > T(1e-9) * kernel.W0() ? 1 : 0;
+  }
+};
+
+/// wet[b] = 1 where the film is positive (seeds of the diffusion region).
+template <class T>
+struct MarkWet {
+  const T* film;
+  std::uint32_t* wet;
+  RIME_HD void operator()(Index b) const { wet[b] = film[b] > T(0) ? 1u : 0u; }
+};
+
+/// region[k] = 1 for every boundary neighbor k of a wet particle (the one-ring dilation, so that
+/// flux into dry neighbors is counted on both sides).
+template <class T>
+struct DilateWet {
+  neighbors::GridView<T> grid;  // over boundary particles
+  const std::uint32_t* wet;
+  T radius;
+  std::uint32_t* region;
+  RIME_HD void operator()(Index b) const {
+    if (!wet[b]) return;
+    region[b] = 1u;
+    grid.ForEachNeighbor(grid.points[b], radius, [&](std::uint32_t k, const Vec3<T>&, T) { region[k] = 1u; });
+  }
+};
+
+/// Conservative SPH Laplacian of the film over the boundary graph (spec §9.3):
+/// L_b = 2 Σ_k V̄_bk (Γ_k − Γ_b)(−x_bk·∇W_bk)/(r²+εh²); also the stability bound λ_b.
+template <class T>
+struct FilmLaplacian {
+  const std::uint32_t* list;
+  neighbors::GridView<T> grid;
+  const T* volume;
+  const T* film;
+  CubicSpline<T> kernel;
+  T epsilon;
+  T* laplacian;  // per list entry
+  T* lambda;     // per list entry
+  RIME_HD void operator()(Index k) const {
+    const std::uint32_t b = list[k];
+    const Vec3<T> xb = grid.points[b];
+    const T fb = film[b], vb = volume[b], eps_h2 = epsilon * kernel.h * kernel.h;
+    T l = T(0), lam = T(0);
+    grid.ForEachNeighbor(xb, kernel.SupportRadius(), [&](std::uint32_t n, const Vec3<T>&, T r2) {
+      if (n == b) return;
+      // −x·∇W = −φ r² with φ = B'(q) σ/(h⁴ r) <= 0.
+      const T weight = T(2) * T(0.5) * (vb + volume[n]) * (-kernel.GradientFactor(std::sqrt(r2)) * r2) / (r2 + eps_h2);
+      l += weight * (film[n] - fb);
+      lam += weight;
+    });
+    laplacian[k] = l;
+    lambda[k] = lam;
+  }
+};
+
+/// Γ_b += Δt_sub D_Γ L_b for the listed particles (after every L was computed: Jacobi).
+template <class T>
+struct ApplyFilmDiffusion {
+  const std::uint32_t* list;
+  const T* laplacian;
+  T step;  // Δt_sub · D_Γ
+  T* film;
+  RIME_HD void operator()(Index k) const {
+    T f = film[list[k]] + step * laplacian[k];
+    film[list[k]] = f < T(0) ? T(0) : (f > T(1) ? T(1) : f);  // guards rounding only: the step is a convex combination
+  }
+};
+
+/// Optional drying Γ ← Γ exp(−k_dry Δt) (no drying in the paper).
+template <class T>
+struct DryFilm {
+  T factor;
+  T* film;
+  RIME_HD void operator()(Index b) const { film[b] *= factor; }
+};
+
+/// Freezing fraction fr_bj (spec §9.5) for boundary b and fluid j.
+template <class T>
+RIME_HDI T FreezingFraction(const Vec3<T>& growth, bool valid, const Vec3<T>& x_isf, const FreezeParams<T>& p) {
+  const T len = Norm(x_isf), g = Norm(growth);
+  if (!valid || len < T(1e-6) * p.h || !(g > T(0))) return T(0.5);
+  const T dot = p.growth_sign * Dot(growth, x_isf) / (g * len);
+  if (p.fr_clamp) return dot > T(0) ? dot : T(0);
+  return (dot + T(1)) * T(0.5);
+}
+
+/// Phase-shift decision (spec §9.6–9.7) for fluid j: the nucleation energy of every boundary
+/// neighbor, aggregated separately over solids and ice; records the kind and the trigger.
+template <class T>
+struct PhaseDecision {
+  const std::uint32_t* fb_offsets;
+  const std::uint32_t* fb_index;
+  const Vec3<T>* x;
+  const Sym6<T>* d;
+  const Vec3<T>* boundary_x;
+  const std::uint8_t* boundary_phase;
+  const T* film;
+  const Vec3<T>* growth;
+  const std::uint8_t* growth_valid;
+  CubicSpline<T> kernel;
+  FreezeParams<T> params;
+  std::uint32_t* decision;  // IceKind
+  std::uint32_t* trigger;   // boundary index whose energy decided (argmax)
+  T* energy_solid;
+  T* energy_ice;
+  RIME_HD void operator()(Index j) const {
+    decision[j] = kNotIce;
+    const std::uint32_t begin = fb_offsets[j], end = fb_offsets[j + 1];
+    if (begin == end) return;
+    const Vec3<T> xj = x[j];
+    const Mat3<T> G = anisotropy::FromComponents(d[j].c) * (T(1) / params.h);
+    const T scale = params.ce_raw ? params.film_max : T(1) / kernel.W0();
+    T ce_s = T(0), ce_i = T(0), best_s = T(-1), best_i = T(-1);
+    std::uint32_t arg_s = 0, arg_i = 0;
+    for (std::uint32_t k = begin; k < end; ++k) {
+      const std::uint32_t b = fb_index[k];
+      const T f = film[b];
+      if (!(f > T(0))) continue;
+      const Vec3<T> x_isf = boundary_x[b] - xj;
+      const T fr = FreezingFraction(growth[b], growth_valid[b] != 0, x_isf, params);
+      const T ce = f * fr * anisotropy::Kernel(x_isf, G) * scale;
+      if (boundary_phase[b] == 2) {
+        ce_i = params.ce_sum ? ce_i + ce : (ce > ce_i ? ce : ce_i);
+        if (ce > best_i) best_i = ce, arg_i = b;
+      } else {
+        ce_s = params.ce_sum ? ce_s + ce : (ce > ce_s ? ce : ce_s);
+        if (ce > best_s) best_s = ce, arg_s = b;
+      }
+    }
+    energy_solid[j] = ce_s;
+    energy_ice[j] = ce_i;
+    if (ce_s > params.glaze_threshold) {  // glaze wins ties
+      decision[j] = kGlaze;
+      trigger[j] = arg_s;
+    } else if (ce_i > params.icicle_threshold) {
+      decision[j] = kIcicle;
+      trigger[j] = arg_i;
+    }
+  }
+};
+
+/// keep[j] = 1 unless j freezes this step.
+struct KeepUnfrozen {
+  const std::uint32_t* decision;
+  std::uint32_t* keep;
+  std::uint32_t* frozen;
+  RIME_HD void operator()(Index j) const {
+    keep[j] = decision[j] == kNotIce ? 1u : 0u;
+    frozen[j] = 1u - keep[j];
+  }
+};
+
+}  // namespace kernels
+}  // namespace rime::freeze
+
+#define RIME_FREEZE_KERNELS_T(X, T)                                                                                     \
+  X(rime::freeze::kernels::MarkContacts<T>) X(rime::freeze::kernels::FluidAnisotropy<T>)                               \
+  X(rime::freeze::kernels::FilmAndGrowth<T>) X(rime::freeze::kernels::MarkWet<T>) X(rime::freeze::kernels::DilateWet<T>) \
+  X(rime::freeze::kernels::FilmLaplacian<T>) X(rime::freeze::kernels::ApplyFilmDiffusion<T>)                           \
+  X(rime::freeze::kernels::DryFilm<T>) X(rime::freeze::kernels::PhaseDecision<T>)
+
+#define RIME_FREEZE_KERNELS(X)                                                                                   \
+  RIME_FREEZE_KERNELS_T(X, float) RIME_FREEZE_KERNELS_T(X, double) X(rime::freeze::kernels::MarkFluidFromBoundary) \
+  X(rime::freeze::kernels::KeepUnfrozen)
