@@ -158,7 +158,7 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(1, 100));
   g->add_flag("--no-decimate", o.no_decimate, "6. Keep the face count");
   g->add_option("--decimate-ratio", o.decimate_ratio, fmt::format("6. Keep this fraction of the faces [{}]", d.decimate_ratio))
-      ->check(CLI::Range(0.0, 1.0));
+      ->check(CLI::Range(1e-6, 1.0));
   g->add_option("--decimate-faces", o.decimate_faces, "6. Target face count (overrides the ratio)")->check(CLI::PositiveNumber);
   g->add_option("--decimate-max-error", o.decimate_max_error,
                 "6. Also stop when a collapse would cost more than this quadric error, m (0 = off) [0]")
@@ -170,7 +170,7 @@ int main(int argc, char** argv) {
   g->add_option("--shape-smooth-iterations", o.shape_smooth_iterations,
                 "7. Mean-curvature-flow iterations, volume restored afterwards (0 = off) [0]")
       ->check(CLI::Range(0, 1000));
-  g->add_option("--shape-smooth-time", o.shape_smooth_time, fmt::format("7. Mean-curvature-flow time step [{}]", d.shape_smooth_time))
+  g->add_option("--shape-smooth-time", o.shape_smooth_time, fmt::format("7. Mean-curvature-flow time step, m^2 (larger smooths more) [{}]", d.shape_smooth_time))
       ->check(CLI::PositiveNumber);
   g->add_option("--self-intersections", o.self_intersections,
                 "8. report (count pairs), remove (CGAL experimental), off [" + d.self_intersections + "]")

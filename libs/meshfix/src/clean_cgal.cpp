@@ -269,7 +269,7 @@ class Chain {
     });
   }
 
-  void FillHoles(const io::TriMesh& input) {
+  void FillHoles() {
     if (!settings_.fill_holes) return;
     Run("holes", [&] {
       std::vector<HalfedgeIndex> cycles;
@@ -304,7 +304,6 @@ class Chain {
       return fmt::format("{} holes filled, {} left (over {} edges or unfillable){}", filled, left, settings_.max_hole_edges,
                          failed_fairing ? fmt::format(", fairing failed on {}", failed_fairing) : "");
     });
-    (void)input;
   }
 
   void Remesh(double mean_input_edge) {
@@ -430,7 +429,7 @@ CleanResult Clean(const io::TriMesh& input, const io::CleanupSettings& settings)
   chain.Load(input);
   chain.RemoveDegenerate();
   chain.RemoveSmallComponents();
-  chain.FillHoles(input);
+  chain.FillHoles();
   chain.Remesh(report.before.mean_edge_length);
   // Decimation before smoothing: relaxation then evens out the triangles the collapses leave, and
   // runs on half as many vertices.

@@ -57,7 +57,7 @@ struct CleanupSettings {
   std::string smooth = "tangential";
   int smooth_iterations = 2;
   int shape_smooth_iterations = 0;
-  double shape_smooth_time = 1e-4;  // time step of the implicit mean-curvature flow, s (CGAL's unit)
+  double shape_smooth_time = 1e-4;  // time step of the implicit mean-curvature flow, m^2 (CGAL smooth_shape)
 
   // 8. Self-intersections: "report" (count pairs), "remove" (CGAL 5.5 experimental removal, then
   // count again), "off".
