@@ -312,3 +312,50 @@ self_intersections = "remove"
 
 }  // namespace
 }  // namespace rime::meshfix
+
+namespace rime::meshfix {
+namespace {
+
+// Two interpenetrating spheres in one mesh: the report counts the intersecting pairs; "remove"
+// either removes them or says that CGAL's experimental removal could not.
+TEST(Clean, SelfIntersectionsAreReportedAndRemovalIsHonest) {
+  io::TriMesh m = procedural::Icosphere(1.0, 3);
+  procedural::Append(m, procedural::Icosphere(1.0, 3, {1.0, 0.1, 0.05}));
+  io::CleanupSettings s;
+  s.decimate = false;
+  s.remove_components = false;
+  const CleanResult reported = Clean(m, s);
+  EXPECT_GT(reported.report.self_intersecting_pairs, 0);
+
+  s.self_intersections = "remove";
+  const CleanResult removed = Clean(m, s);
+  ASSERT_GE(removed.report.self_intersecting_pairs, 0);
+  if (removed.report.self_intersecting_pairs == 0) {
+    EXPECT_TRUE(removed.report.self_intersections_removed);
+  } else {
+    EXPECT_FALSE(removed.report.self_intersections_removed);
+    bool warned = false;
+    for (const auto& w : removed.report.warnings) warned |= w.find("remove_self_intersections") != std::string::npos;
+    EXPECT_TRUE(warned);
+  }
+  s.self_intersections = "off";
+  EXPECT_EQ(Clean(m, s).report.self_intersecting_pairs, -1);
+}
+
+TEST(Clean, HolesLargerThanTheLimitStayOpenWithAWarning) {
+  io::TriMesh sphere = procedural::Icosphere(1.0, 4);
+  procedural::PunchHole(sphere, {0, 0, 1}, 0.5);
+  io::CleanupSettings s;
+  s.decimate = false;
+  s.max_hole_edges = 10;
+  const CleanResult r = Clean(sphere, s);
+  EXPECT_EQ(r.report.holes_filled, 0u);
+  EXPECT_EQ(r.report.holes_left, 1u);
+  EXPECT_FALSE(r.report.closed());
+  EXPECT_GT(r.report.after.boundary_edges, 10u);
+  ASSERT_FALSE(r.report.warnings.empty());
+  EXPECT_NE(r.report.warnings.back().find("not closed"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace rime::meshfix

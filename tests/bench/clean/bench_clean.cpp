@@ -69,7 +69,8 @@ int main(int argc, char** argv) {
       // A rigid rotation's velocity field, as rime-surface writes for motion blur.
       for (const Vec3f& p : mesh.positions) mesh.velocities.push_back(Vec3f(-p.y, p.x, 0.1f));
       const fs::path file = fs::path(scratch) / fmt::format("{}_{}.ply", shape, size);
-      std::vector<double> read_s, write_s, clean_s, cpu_s;
+      std::vector<double> read_s, write_s, clean_s, cpu_s, read_obj_s, write_obj_s;
+      const fs::path obj_file = fs::path(file).replace_extension(".obj");
       std::map<std::string, std::vector<double>> per_op;
       meshfix::CleanReport last;
       for (int r = 0; r < runs; ++r) {
@@ -79,6 +80,13 @@ int main(int argc, char** argv) {
         t = std::chrono::steady_clock::now();
         const io::TriMesh read = io::ReadMesh(file);
         read_s.push_back(Seconds(t));
+        t = std::chrono::steady_clock::now();
+        io::WriteMesh(obj_file, mesh);
+        write_obj_s.push_back(Seconds(t));
+        t = std::chrono::steady_clock::now();
+        if (io::ReadMesh(obj_file).triangle_count() != mesh.triangle_count()) throw std::runtime_error("OBJ round trip lost faces");
+        read_obj_s.push_back(Seconds(t));
+        fs::remove(obj_file);
         t = std::chrono::steady_clock::now();
         const double cpu0 = ProcessCpuSeconds();
         meshfix::CleanResult result = meshfix::Clean(read, settings);
@@ -102,6 +110,8 @@ int main(int argc, char** argv) {
       fmt::print("{:>6} {:>9} {:>9} {:>7.2f} {:>7.2f} {:>8.2f} {:>8.2f} {:>8.0f} {:>12.0f} {}\n", shape, last.before.faces,
                  last.after.faces, Median(read_s), Median(write_s), clean, cpu, rate / 1e3, rate_per_core_cpu / 1e3, ops);
       fmt::print("{:>6} {}\n", "", meshfix::SummaryLine(last));
+      fmt::print("{:>6} OBJ read {:.2f} s, write {:.2f} s; binary PLY read {:.2f} s, write {:.2f} s\n", "", Median(read_obj_s),
+                 Median(write_obj_s), Median(read_s), Median(write_s));
       std::fflush(stdout);
       results.push_back({{"shape", shape},
                          {"triangles_in", last.before.faces},
@@ -110,6 +120,8 @@ int main(int argc, char** argv) {
                          {"runs", runs},
                          {"read_ply_seconds", Median(read_s)},
                          {"write_ply_seconds", Median(write_s)},
+                         {"read_obj_seconds", Median(read_obj_s)},
+                         {"write_obj_seconds", Median(write_obj_s)},
                          {"clean_seconds", clean},
                          {"input_triangles_per_second", rate},
                          {"input_triangles_per_second_per_core", rate / threads},
