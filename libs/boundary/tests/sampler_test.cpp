@@ -65,7 +65,9 @@ TEST(SampleSurface, NormalsPointOutOfTheCube) {
   // A particle in the middle of the bottom face has the face normal (0, 0, -1).
   for (std::size_t i = 0; i < s.size(); ++i) {
     const Vec3f& p = s.positions[i];
-    if (p.z == 0 && p.x > 0.2f && p.x < 0.8f && p.y > 0.2f && p.y < 0.8f) EXPECT_NEAR(s.normals[i].z, -1.0f, 1e-6f);
+    if (p.z == 0 && p.x > 0.2f && p.x < 0.8f && p.y > 0.2f && p.y < 0.8f) {
+      EXPECT_NEAR(s.normals[i].z, -1.0f, 1e-6f);
+    }
   }
 }
 

@@ -40,7 +40,9 @@ struct Analytic {
 void CheckSampledShape(const io::TriMesh& mesh, const Analytic& exact, double db, double area, double volume,
                        double min_normal_dot = 0.95) {
   EXPECT_NEAR(Area(mesh), area, 0.01 * area);
-  if (volume > 0) EXPECT_NEAR(SignedVolume(mesh), volume, 0.01 * volume);
+  if (volume > 0) {
+    EXPECT_NEAR(SignedVolume(mesh), volume, 0.01 * volume);
+  }
   SampleOptions options;
   options.spacing = db;
   const SurfaceSamples s = SampleSurface(mesh, options);
