@@ -117,3 +117,134 @@ TEST(Freezing, HigherThresholdsNeverFreezeMore) {
 
 }  // namespace
 }  // namespace rime::sph
+
+namespace rime::sph {
+namespace {
+
+struct IceShape {
+  std::size_t count = 0;
+  Vec3d axis;           // principal axis of the ice cloud (unit)
+  double elongation = 0;  // sqrt(σ1/σ2)
+  Vec3d growth;         // centroid of the youngest third minus centroid of the oldest third
+};
+
+IceShape MeasureIce(const Simulation<float>& sim) {
+  const io::ParticleFrame f = sim.Snapshot(0);
+  const auto x = f.GetPositions<double>();
+  const auto& phase = f.Get<std::uint8_t>("phase");
+  const auto& created = f.Get<double>("ice_time");
+  std::vector<std::pair<double, Vec3d>> ice;
+  for (std::size_t i = 0; i < x.size(); ++i)
+    if (phase[i] == 2) ice.push_back({created[i], x[i]});
+  IceShape s;
+  s.count = ice.size();
+  if (ice.size() < 6) return s;
+  Vec3d mean{};
+  for (const auto& [t, p] : ice) mean += p / double(ice.size());
+  Mat3<double> c;
+  for (const auto& [t, p] : ice) c += Mat3<double>::OuterProduct(p - mean, p - mean) * (1.0 / ice.size());
+  Vec3d values;
+  Mat3<double> vectors;
+  SymmetricEigen(c, values, vectors);
+  s.axis = vectors.Column(0);
+  s.elongation = std::sqrt(values.x / std::max(values.y, 1e-30));
+  std::stable_sort(ice.begin(), ice.end(), [](auto& a, auto& b) { return a.first < b.first; });
+  const std::size_t third = ice.size() / 3;
+  Vec3d old_c{}, young_c{};
+  for (std::size_t i = 0; i < third; ++i) old_c += ice[i].second / double(third), young_c += ice[ice.size() - 1 - i].second / double(third);
+  s.growth = young_c - old_c;
+  return s;
+}
+
+// A thin stream along ±x over a cold plate (spec §9.4–9.5, issue acceptance).
+IceShape StreamOverPlate(double direction, const std::string& growth) {
+  io::Scene scene;
+  scene.fluid.spacing = kDp;
+  scene.modules = {"gravity", "viscosity", "freezing"};
+  scene.freezing.glaze_threshold = 0.05;
+  scene.freezing.icicle_threshold = 0.01;
+  scene.freezing.growth = growth;
+  io::Emitter e;
+  e.shape = "disc";  // a thin jet: three particles across
+  e.center = {0.36 - direction * 0.25, 0.36, 0.05};
+  e.direction = {direction, 0, -0.2};
+  e.radius = 0.021;
+  e.speed = 0.8;
+  e.stop = 0.4;
+  scene.emitters.push_back(e);
+  io::SolidObject plate;
+  plate.name = "box";
+  scene.solids.push_back(plate);
+  Simulation<float> sim(scene, exec::Device::Cpu());
+  sim.AddBoundaryObject(test::BoxBoundary(kDp, 0.72, 0.72, 0.1), "box");
+  sim.Initialize();
+  while (sim.time() < 0.6 - 1e-9) sim.Step(sim.NextTimeStep(0.6));
+  return MeasureIce(sim);
+}
+
+double AngleToX(const Vec3d& axis) {
+  return std::acos(std::min(1.0, std::fabs(axis.x) / Norm(axis))) * 180 / M_PI;
+}
+
+TEST(Freezing, IceFollowsTheFlowDirection) {
+  const IceShape plus = StreamOverPlate(+1, "anisotropic");
+  const IceShape minus = StreamOverPlate(-1, "anisotropic");
+  const IceShape iso = StreamOverPlate(+1, "isotropic");
+  std::printf("stream +x: %zu ice, axis %.1f deg from x, elongation %.2f, growth (%.3f %.3f %.3f)\n", plus.count, AngleToX(plus.axis),
+              plus.elongation, plus.growth.x, plus.growth.y, plus.growth.z);
+  std::printf("stream -x: %zu ice, axis %.1f deg from x, elongation %.2f, growth (%.3f %.3f %.3f)\n", minus.count, AngleToX(minus.axis),
+              minus.elongation, minus.growth.x, minus.growth.y, minus.growth.z);
+  std::printf("isotropic: %zu ice, axis %.1f deg from x, elongation %.2f\n", iso.count, AngleToX(iso.axis), iso.elongation);
+  ASSERT_GT(plus.count, 20u);
+  ASSERT_GT(minus.count, 20u);
+  EXPECT_LT(AngleToX(plus.axis), 20.0);
+  EXPECT_LT(AngleToX(minus.axis), 20.0);
+  EXPECT_LT(plus.growth.x * minus.growth.x, 0.0) << "flipping the flow must flip the direction of growth";
+  EXPECT_LT(iso.elongation, plus.elongation) << "isotropic growth must be less elongated";
+}
+
+// Glaze: slow water running down a cold wall leaves a thin layer, not blobs (issue acceptance).
+TEST(Freezing, SlowWaterOnAWallLeavesAThinGlaze) {
+  io::Scene scene;
+  scene.fluid.spacing = kDp;
+  scene.modules = {"gravity", "viscosity", "freezing"};
+  // Glaze regime: freezing on solid contact is easy, growth off existing ice is hard.
+  scene.freezing.glaze_threshold = 0.01;
+  scene.freezing.icicle_threshold = 0.05;
+  io::Emitter e;
+  e.shape = "rectangle";
+  e.center = {1.2 * kDp, 0.36, 0.25};
+  e.direction = {0, 0, -1};
+  e.width = 0.12;   // a sheet along the wall (width runs along y for a downward nozzle)
+  e.height = 0.01;  // one particle thick
+  e.speed = 0.3;
+  e.stop = 1.0;
+  scene.emitters.push_back(e);
+  io::SolidObject box;
+  box.name = "box";
+  scene.solids.push_back(box);
+  Simulation<float> sim(scene, exec::Device::Cpu());
+  sim.AddBoundaryObject(test::BoxBoundary(kDp, 0.72, 0.72, 0.3), "box");
+  sim.Initialize();
+  while (sim.time() < 1.2 - 1e-9) sim.Step(sim.NextTimeStep(1.2));
+  const io::ParticleFrame f = sim.Snapshot(0);
+  const auto x = f.GetPositions<double>();
+  const auto& phase = f.Get<std::uint8_t>("phase");
+  std::vector<double> distance;  // from the wall x = 0
+  double zmin = 1e9, zmax = -1e9;
+  for (std::size_t i = 0; i < x.size(); ++i)
+    if (phase[i] == 2 && x[i].z > 2 * kDp) {  // on the wall, not the floor
+      distance.push_back(x[i].x);
+      zmin = std::min(zmin, x[i].z), zmax = std::max(zmax, x[i].z);
+    }
+  ASSERT_GT(distance.size(), 20u) << "no glaze formed on the wall";
+  std::sort(distance.begin(), distance.end());
+  const double p90 = distance[distance.size() * 9 / 10];
+  std::printf("glaze on the wall: %zu ice particles, 90%% within %.1f spacings of the wall, spread over %.1f spacings of height\n",
+              distance.size(), p90 / kDp, (zmax - zmin) / kDp);
+  EXPECT_LT(p90, 3.5 * kDp) << "the glaze layer must be thin";
+  EXPECT_GT(zmax - zmin, 4 * kDp) << "the glaze must spread along the wall, not form one blob";
+}
+
+}  // namespace
+}  // namespace rime::sph
