@@ -32,6 +32,27 @@ namespace {
 
 double SmoothingLength(const ParticleSet& p) { return p.smoothing_length > 0 ? p.smoothing_length : p.spacing; }
 
+// Smallest and largest eigenvalue of a symmetric 3x3 matrix (closed form, Smith 1961): cheaper
+// than Jacobi sweeps when the stored D needs no change.
+void EigenvalueRange(const std::array<float, 6>& c, double& lo, double& hi) {
+  const double a = c[0], b = c[1], d = c[2], xy = c[3], xz = c[4], yz = c[5];
+  const double p1 = xy * xy + xz * xz + yz * yz;
+  const double q = (a + b + d) / 3;
+  if (p1 <= 1e-20 * (q * q + 1e-30)) {
+    lo = std::min({a, b, d}), hi = std::max({a, b, d});
+    return;
+  }
+  const double p2 = (a - q) * (a - q) + (b - q) * (b - q) + (d - q) * (d - q) + 2 * p1;
+  const double p = std::sqrt(p2 / 6);
+  // B = (A − qI) / p; r = det(B) / 2.
+  const double b00 = (a - q) / p, b11 = (b - q) / p, b22 = (d - q) / p, b01 = xy / p, b02 = xz / p, b12 = yz / p;
+  const double det = b00 * (b11 * b22 - b12 * b12) - b01 * (b01 * b22 - b12 * b02) + b02 * (b01 * b12 - b11 * b02);
+  const double r = std::clamp(det / 2, -1.0, 1.0);
+  const double phi = std::acos(r) / 3;
+  hi = q + 2 * p * std::cos(phi);
+  lo = q + 2 * p * std::cos(phi + 2.0943951023931953);
+}
+
 }  // namespace
 
 double VoxelSize(const ParticleSet& particles, const Settings& settings) {
@@ -69,7 +90,17 @@ PreparedParticles Prepare(const ParticleSet& particles, const Settings& settings
   const float support = float(2 * h);
   exec::Device cpu = exec::Device::Cpu();
   neighbors::UniformGrid<float> grid(cpu);
-  if (need_neighbors) grid.Build(local.data(), Index(n), support);
+  // Visit particles in the grid's Z-curve order so neighbours are close in memory.
+  std::vector<std::uint32_t> order(n);
+  std::vector<Vec3f> sorted(n);
+  if (need_neighbors) {
+    grid.Build(local.data(), Index(n), support);
+    std::copy(grid.order(), grid.order() + n, order.begin());
+    exec::cpu::ParallelFor(Index(n), [&](Index k) { sorted[k] = local[order[k]]; });
+    grid.AdoptOrder(sorted.data());
+  } else {
+    for (std::size_t k = 0; k < n; ++k) order[k] = std::uint32_t(k), sorted[k] = local[k];
+  }
   const neighbors::GridView<float> view = grid.view();
   const CubicSpline<float> kernel{float(h)};
 
@@ -91,17 +122,18 @@ PreparedParticles Prepare(const ParticleSet& particles, const Settings& settings
   params.s_min = float(settings.anisotropy.s_min), params.s_max = float(settings.anisotropy.s_max);
   params.center_on_particle = settings.anisotropy.center_on_particle;
 
-  exec::cpu::ParallelFor(Index(n), [&](Index i) {
+  exec::cpu::ParallelFor(Index(n), [&](Index k) {
+    const Index i = order[k];
     anisotropy::CovarianceAccumulator<float> acc;
     acc.AddSelf(kernel.W0());
     if (need_pca) {
-      view.ForEachNeighbor(local[i], support, [&](std::uint32_t j, const Vec3f& r, float) {
-        if (j != std::uint32_t(i)) acc.Add(-r, kernel.W(Norm(r)));
+      view.ForEachNeighbor(sorted[k], support, [&](std::uint32_t j, const Vec3f& r, float) {
+        if (j != std::uint32_t(k)) acc.Add(-r, kernel.W(Norm(r)));
       });
     } else if (need_neighbors) {
       // Centre smoothing needs only the weighted mean: skip the second moments.
-      view.ForEachNeighbor(local[i], support, [&](std::uint32_t j, const Vec3f& r, float) {
-        if (j == std::uint32_t(i)) return;
+      view.ForEachNeighbor(sorted[k], support, [&](std::uint32_t j, const Vec3f& r, float) {
+        if (j == std::uint32_t(k)) return;
         const float w = kernel.W(Norm(r));
         acc.weight_sum += w;
         acc.first -= r * w;
@@ -116,6 +148,16 @@ PreparedParticles Prepare(const ParticleSet& particles, const Settings& settings
 
     // D = R diag(1/s) Rᵀ: stretches below the floor are raised (and a non-positive stored D repaired).
     anisotropy::Anisotropy<float> a;
+    if (stored) {
+      double lo, hi;
+      EigenvalueRange(particles.stored_anisotropy[i], lo, hi);
+      if (lo > 0 && hi * s_floor <= 1) {  // a valid D already above the floor: keep it as stored
+        out.D[i] = particles.stored_anisotropy[i];
+        out.min_stretch[i] = float(1 / hi);
+        out.max_stretch[i] = float(1 / lo);
+        return;
+      }
+    }
     if (stored) {
       const auto& c = particles.stored_anisotropy[i];
       Vec3f inv_s;

@@ -171,6 +171,7 @@ void SplatEllipsoid(const FieldInputs& in, std::uint32_t i, const Vec3f& c, floa
   }
   const SymMat d2 = Square(d);
   const float rho = in.rho;
+  const bool track = in.track_nearest;
   const float center_value = -rho * (in.min_stretch ? in.min_stretch[i] : 1.0f);
   for (int x = lo[0]; x <= hi[0]; ++x) {
     const float rx = float(x) - c.x;
@@ -192,11 +193,12 @@ void SplatEllipsoid(const FieldInputs& in, std::uint32_t i, const Vec3f& c, floa
         const float q2 = px * px + py * py + pz * pz;
         const float p2 = qx * qx + qy * qy + qz * qz;
         const float q = std::sqrt(q2);
-        const float phi = p2 > 1e-12f ? (q - rho) * q / std::sqrt(p2) : center_value;
+        const float phi = p2 > 1e-12f ? (q - rho) * q / std::sqrt(std::max(p2, 1e-12f)) : center_value;
         float& slot = buf.phi[row + z];
-        if (phi < slot) {
-          slot = phi;
-          if (in.track_nearest) buf.nearest[row + z] = std::int32_t(i);
+        if (track) {
+          if (phi < slot) slot = phi, buf.nearest[row + z] = std::int32_t(i);
+        } else {
+          slot = std::min(slot, phi);  // branch-free: lets the compiler vectorise the row
         }
       }
     }
