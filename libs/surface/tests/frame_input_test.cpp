@@ -85,3 +85,41 @@ TEST(FrameInput, RejectsBadFrames) {
 
 }  // namespace
 }  // namespace rime::surface
+
+#include "rime/io/scene.h"
+
+namespace rime::surface {
+namespace {
+
+TEST(SurfaceScene, ReadsTheSurfaceSectionWithRangeChecks) {
+  const io::Scene scene = io::ParseScene(R"([surface]
+phase = "both"
+water_field = "isotropic"
+voxel_ratio = 0.25
+r_iso = 0.6
+lambda = 0.5
+smooth = 2
+formats = ["ply", "vdb"]
+)",
+                                         "scene.toml");
+  EXPECT_EQ(scene.surface.phase, "both");
+  EXPECT_EQ(scene.surface.water_field, "isotropic");
+  EXPECT_EQ(scene.surface.ice_field, "ellipsoids");
+  EXPECT_DOUBLE_EQ(scene.surface.voxel_ratio, 0.25);
+  EXPECT_DOUBLE_EQ(scene.surface.r_iso, 0.6);
+  EXPECT_EQ(scene.surface.smooth, 2);
+  EXPECT_EQ(scene.surface.formats, (std::vector<std::string>{"ply", "vdb"}));
+  for (const char* bad : {"[surface]\nlambda = 1.5\n", "[surface]\nhalf_band = 2\n", "[surface]\nphase = \"steam\"\n",
+                          "[surface]\nformats = [\"stl\"]\n", "[surface]\nvoxel_raito = 0.5\n"}) {
+    try {
+      io::ParseScene(bad, "scene.toml");
+      FAIL() << "accepted: " << bad;
+    } catch (const Error& e) {
+      EXPECT_EQ(e.code(), ExitCode::kBadInput) << bad;
+      EXPECT_NE(std::string(e.what()).find("scene.toml"), std::string::npos) << e.what();
+    }
+  }
+}
+
+}  // namespace
+}  // namespace rime::surface

@@ -94,6 +94,20 @@ TEST_F(Cli, WritesEveryFormatForBothPhases) {
   EXPECT_NE(run.output.find("particles read"), std::string::npos) << run.output;
 }
 
+TEST_F(Cli, SceneSectionGivesDefaultsAndFlagsOverride) {
+  rime::io::WriteParticleFrame(Frame(3), MakeFrame(3, true));
+  const fs::path scene = dir_ / "scene.toml";
+  std::ofstream(scene) << "[surface]\nphase = \"water\"\nformats = [\"ply\"]\n";
+  const RunResult run = Execute(Frame(3).string() + " -o " + Out() + " --scene " + scene.string());
+  ASSERT_EQ(run.code, 0) << run.output;
+  EXPECT_TRUE(fs::exists(rime::io::FramePath(Out(), "water", 3, "ply")));
+  EXPECT_FALSE(fs::exists(rime::io::FramePath(Out(), "ice", 3, "ply")));
+  EXPECT_FALSE(fs::exists(rime::io::FramePath(Out(), "water", 3, "obj")));
+  const RunResult flags = Execute(Frame(3).string() + " -o " + Out() + " --scene " + scene.string() + " --phase ice --format obj");
+  ASSERT_EQ(flags.code, 0) << flags.output;
+  EXPECT_TRUE(fs::exists(rime::io::FramePath(Out(), "ice", 3, "obj")));
+}
+
 TEST_F(Cli, MissingFramesInARangeFailBeforeWriting) {
   for (int f : {1, 2, 4}) rime::io::WriteParticleFrame(Frame(f), MakeFrame(f, true));
   const RunResult run = Execute(Sim() + " -o " + Out() + " --frames 1-4");
