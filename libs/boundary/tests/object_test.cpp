@@ -127,6 +127,25 @@ TEST(BoundaryObject, MeshFileFormatsThroughAssimp) {
   fs::remove_all(dir);
 }
 
+TEST(BoundaryObject, MultiMeshFilesMergeUnlessAskedOtherwise) {
+  const fs::path dir = TempDir("parts");
+  // Two named objects with the same triangle, 1 mm apart: merged, the copy is removed as a
+  // near-duplicate; kept apart, both layers stay.
+  WriteText(dir / "two.obj", "o a\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\no b\nv 0 0 0.001\nv 1 0 0.001\nv 0 1 0.001\nf 4 5 6\n");
+  io::SolidObject object = MeshObject(dir / "two.obj");
+  BoundarySettings settings;
+  settings.particle_spacing = 0.1;
+  const BoundaryObject merged = BuildBoundaryObject(object, 0, dir / "two.obj", settings);
+  object.merge_meshes = false;
+  const BoundaryObject separate = BuildBoundaryObject(object, 0, dir / "two.obj", settings);
+  EXPECT_EQ(merged.meshes, 2u);
+  EXPECT_EQ(separate.meshes, 2u);
+  EXPECT_EQ(separate.size(), 2 * merged.size());
+  EXPECT_EQ(merged.stats.near_duplicates_removed, merged.size());
+  EXPECT_EQ(separate.stats.near_duplicates_removed, 0u);
+  fs::remove_all(dir);
+}
+
 void ExpectBadFile(const fs::path& file, const std::string& fragment, double spacing = 0.02, std::uint64_t max_particles = 50'000'000) {
   BoundarySettings settings;
   settings.particle_spacing = spacing;

@@ -28,6 +28,7 @@ std::vector<TriMesh> ReadParts(const std::filesystem::path& path, ImportStats* s
                      where);
   // Points and lines are dropped; polygons become triangles; the node hierarchy is baked in.
   importer.SetPropertyInteger(AI_CONFIG_PP_SBP_REMOVE, aiPrimitiveType_POINT | aiPrimitiveType_LINE);
+  importer.SetPropertyBool(AI_CONFIG_PP_PTV_KEEP_HIERARCHY, true);  // bake transforms, keep meshes apart
   const aiScene* scene = importer.ReadFile(path.string(), aiProcess_Triangulate | aiProcess_JoinIdenticalVertices |
                                                               aiProcess_SortByPType | aiProcess_PreTransformVertices);
   if (scene == nullptr) {

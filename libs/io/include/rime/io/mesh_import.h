@@ -25,8 +25,8 @@ struct ImportStats {
 /// parts); use ImportMeshParts to keep the parts apart.
 TriMesh ImportMesh(const std::filesystem::path& path, const ImportOptions& options = {}, ImportStats* stats = nullptr);
 
-/// Every mesh of the file as its own TriMesh (after baking the node transforms; assimp may combine
-/// meshes that share a material). Same checks and errors as ImportMesh.
+/// Every mesh of the file as its own TriMesh (node transforms baked in). Same checks and errors as
+/// ImportMesh.
 std::vector<TriMesh> ImportMeshParts(const std::filesystem::path& path, ImportStats* stats = nullptr);
 
 }  // namespace rime::io
