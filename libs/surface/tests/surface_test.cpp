@@ -228,6 +228,24 @@ TEST(Reconstruct, FlatEllipsoidIsRaisedToHalfAVoxel) {
   ExpectClosedOutward(result.mesh, "flat particle");
 }
 
+TEST(Reconstruct, SmoothingKeepsAClosedSurfaceOfTheSameSize) {
+  ParticleSet ball = Ball(8 * kSpacing);
+  StoreAnisotropy(ball);
+  Settings plain, smooth;
+  smooth.smooth_iterations = 3;
+  const Result a = Reconstruct(ball, plain), b = Reconstruct(ball, smooth);
+  ExpectClosedOutward(b.mesh, "smoothed");
+  EXPECT_NEAR(MeanDistance(b.mesh, {0, 0, 0}), MeanDistance(a.mesh, {0, 0, 0}), a.stats.voxel_size);
+  // Mean-curvature flow removes the particle bumps: vertex distances from the centre spread less.
+  const auto spread = [](const io::TriMesh& m) {
+    const double mean = MeanDistance(m, {0, 0, 0});
+    double var = 0;
+    for (const Vec3f& p : m.positions) var += std::pow(Norm(Vec3d(p)) - mean, 2);
+    return std::sqrt(var / double(m.positions.size()));
+  };
+  EXPECT_LT(spread(b.mesh), spread(a.mesh));
+}
+
 TEST(Reconstruct, EmptyInputGivesAValidEmptyLevelSet) {
   ParticleSet none;
   none.spacing = kSpacing;
