@@ -145,6 +145,7 @@ int Run(const rime::io::Scene& scene, const Options& opt, const rime::tool::Comm
                  {"density_error_max", max_error},
                  {"max_speed", frame_speed},
                  {"fluid_particles", sim.fluid_count()},
+                 {"ice_particles", sim.ice_count()},
                  {"removed_total", sim.removed_total()},
                  {"wall_seconds", wall}};
     stats_lines.push_back(line.dump());
@@ -161,13 +162,15 @@ int Run(const rime::io::Scene& scene, const Options& opt, const rime::tool::Comm
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - wall_start).count();
   const auto& t = sim.timings();
   const double us_per_particle_step = particle_steps ? 1e6 * wall / double(particle_steps) : 0;
-  log::Info("done: {} frames, {} steps, {:.2f} pressure iterations/step, max speed {:.3g} m/s, {} particles left the domain",
-            last_frame - first_frame, total_steps, total_steps ? double(total_iterations) / total_steps : 0.0, max_speed, removed);
-  log::Info("time: {} total, {:.3g} us per particle-step (neighbors {:.0f}%, forces {:.0f}%, pressure {:.0f}%, integration {:.0f}%), "
-            "peak memory {} MiB, {} threads",
-            FormatDuration(wall), us_per_particle_step, 100 * t.neighbor_search / std::max(1e-12, t.total()),
-            100 * t.non_pressure / std::max(1e-12, t.total()), 100 * t.pressure_solve / std::max(1e-12, t.total()),
-            100 * t.integration / std::max(1e-12, t.total()), tool::PeakMemoryBytes() >> 20, exec::CpuThreads());
+  log::Info("done: {} frames, {} steps, {:.2f} pressure iterations/step, max speed {:.3g} m/s, {} water, {} ice, {} particles left the domain",
+            last_frame - first_frame, total_steps, total_steps ? double(total_iterations) / total_steps : 0.0, max_speed, sim.fluid_count(),
+            sim.ice_count(), removed);
+  const double total = std::max(1e-12, t.total());
+  log::Info("time: {} total, {:.3g} us per particle-step (neighbors {:.0f}%, forces {:.0f}%, pressure {:.0f}%, integration {:.0f}%, "
+            "freezing {:.0f}%), peak memory {} MiB, {} threads",
+            FormatDuration(wall), us_per_particle_step, 100 * t.neighbor_search / total, 100 * t.non_pressure / total,
+            100 * t.pressure_solve / total, 100 * t.integration / total, 100 * t.freezing / total, tool::PeakMemoryBytes() >> 20,
+            exec::CpuThreads());
   tool::WriteSummary(common, {{"tool", "rime-sim"},
                               {"scene", scene.file.string()},
                               {"frames", last_frame - first_frame},
@@ -179,6 +182,7 @@ int Run(const rime::io::Scene& scene, const Options& opt, const rime::tool::Comm
                               {"fluid_particles", sim.fluid_count()},
                               {"boundary_particles", sim.boundary_count()},
                               {"removed_particles", sim.removed_total()},
+                              {"ice_particles", sim.ice_count()},
                               {"wall_seconds", wall},
                               {"us_per_particle_step", us_per_particle_step},
                               {"peak_memory_bytes", tool::PeakMemoryBytes()},

@@ -745,7 +745,11 @@ void Simulation<T>::CheckDivergence(const StepStats& stats) const {
   const double limit = scene_.solver.divergence_density_error;
   const bool bad_error = !std::isfinite(stats.average_density_error) || stats.average_density_error > limit;
   const bool bad_speed = !std::isfinite(stats.max_speed);
-  if (!bad_error && !bad_speed) return;
+  // A particle crossing more than two spacings in one step tunnels through single-layer walls:
+  // the time step is far beyond the CFL limit (spec §7 uses 0.4).
+  const double courant = stats.max_speed * stats.dt / scene_.fluid.spacing;
+  const bool bad_courant = courant > 2.0;
+  if (!bad_error && !bad_speed && !bad_courant) return;
   // Name the worst particle: a non-finite one, else the fastest.
   const auto x = Positions();
   const auto v = Velocities();
@@ -763,8 +767,9 @@ void Simulation<T>::CheckDivergence(const StepStats& stats) const {
   std::string particle = x.empty() ? "no particles"
                                    : fmt::format("worst particle id {} at ({:.4g}, {:.4g}, {:.4g}) m, speed {:.4g} m/s", ids[worst],
                                                  double(x[worst].x), double(x[worst].y), double(x[worst].z), double(Norm(v[worst])));
-  const std::string reason = bad_speed ? "a particle velocity became NaN or infinite"
-                                       : fmt::format("average density error {:.3g}% exceeds the limit {:.3g}% (simulation.divergence_density_error)",
+  const std::string reason = bad_speed     ? "a particle velocity became NaN or infinite"
+                             : bad_courant ? fmt::format("particles move {:.3g} spacings per step (CFL number above 2): the time step is too large", courant)
+                                           : fmt::format("average density error {:.3g}% exceeds the limit {:.3g}% (simulation.divergence_density_error)",
                                                      100 * stats.average_density_error, 100 * limit);
   throw Error(ExitCode::kDiverged, fmt::format("simulation diverged at step {} (t = {:.6g} s, dt = {:.3g} s): {}; {}. Reduce "
                                                "simulation.dt_max or cfl, or check the scene",
