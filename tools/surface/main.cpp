@@ -15,6 +15,7 @@
 #include "rime/core/error.h"
 #include "rime/core/log.h"
 #include "rime/core/progress.h"
+#include "rime/exec/device.h"
 #include "rime/io/mesh.h"
 #include "rime/io/particles.h"
 #include "rime/io/scene.h"
@@ -98,6 +99,8 @@ std::vector<FrameFile> CollectFrames(const std::vector<std::string>& inputs, con
                                    first, last),
                        inputs.size() == 1 ? inputs[0] : "inputs");
   }
+  // Check every header (format, version, kind) before any output is written.
+  for (const FrameFile& f : out) io::ReadParticleFrameHeader(f.path, "particles");
   if (out.empty())
     throw InputError(sequence ? "no frame files (NAME.NNNN.h5part) found" : "no input frames in the requested range",
                      fmt::format("{}", fmt::join(inputs, " ")));
@@ -227,7 +230,9 @@ int main(int argc, char** argv) {
         surface::Settings s = settings;
         s.field = job.field;
         if (budget_gb > 0) {
-          const double estimate = double(surface::EstimateMemoryBytes(particles, s));
+          // Frames run side by side: each may use its share of the budget only.
+          const double concurrent = double(std::min<std::size_t>(frames.size(), std::size_t(std::max(1, exec::CpuThreads()))));
+          const double estimate = double(surface::EstimateMemoryBytes(particles, s)) * concurrent;
           if (estimate > budget_gb * 1e9)
             throw InputError(fmt::format("frame {} {}: estimated peak memory {:.2f} GB exceeds --memory-budget {:.2f} GB at voxel "
                                          "size {:.4g} m; use a larger --voxel-size",

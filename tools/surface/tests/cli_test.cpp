@@ -154,7 +154,8 @@ TEST_F(Cli, RefusesNewerFormatVersionAndMemoryBudget) {
   H5Awrite(attr, H5T_NATIVE_DOUBLE, &version);
   H5Aclose(attr);
   H5Fclose(file);
-  const RunResult newer = Execute(Frame(1).string() + " -o " + Out());
+  rime::io::WriteParticleFrame(Frame(0), MakeFrame(0, true));  // a good frame beside it is not written either
+  const RunResult newer = Execute(Sim() + " -o " + Out());
   EXPECT_EQ(newer.code, 3) << newer.output;
   EXPECT_NE(newer.output.find("newer"), std::string::npos) << newer.output;
   EXPECT_EQ(OutputFiles(), 0u);
