@@ -175,6 +175,7 @@ std::vector<Job> BuildGraph(const SceneDocument& doc, const BakeLayout& layout, 
     cleanup.args = {mesh.string(), "-o", layout.clean().string(), "--scene", scene_path};
     cleanup.inputs = {mesh};
     cleanup.dependencies = {surface.id};
+    cleanup.skip_when_input_mesh_empty = true;
     for (const char* ext : {"obj", "ply", "json"}) cleanup.outputs.push_back(io::FramePath(layout.clean(), cleaned, f, ext));
     add(cleanup);
     frame_threads(jobs.back().args);
@@ -192,8 +193,8 @@ std::vector<Job> BuildGraph(const SceneDocument& doc, const BakeLayout& layout, 
     render.args = {"--background", "--factory-startup", "-noaudio", "--python", (preview_data / "render_preview.py").string(), "--",
                    "--setup", (preview_data / "preview_scene.json").string(), "--ice", clean_mesh.string(),
                    "--water", water_mesh.string(), "--output", image.string()};
-    render.inputs = {clean_mesh, preview_data / "render_preview.py", preview_data / "preview_scene.json"};
-    render.optional_inputs = {water_mesh};
+    render.inputs = {preview_data / "render_preview.py", preview_data / "preview_scene.json"};
+    render.optional_inputs = {clean_mesh, water_mesh};  // frames without ice have no cleaned mesh
     render.dependencies = {cleanup.id};
     render.outputs = {image};
     add(std::move(render));

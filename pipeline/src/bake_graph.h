@@ -37,6 +37,9 @@ struct Job {
   std::filesystem::path log;
   bool exclusive = false;  // runs alone (the simulation uses every core itself)
   bool resumable = false;  // the simulation: `--resume` continues an interrupted run
+  /// Cleanup: a frame whose mesh has no triangles (no ice yet) has nothing to clean; the tool is
+  /// not run (rime-clean refuses empty meshes) and the frame gets no cleaned mesh.
+  bool skip_when_input_mesh_empty = false;
   std::filesystem::path resume_folder;  // cleared before a non-resumed rerun
 };
 

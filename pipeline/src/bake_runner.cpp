@@ -53,6 +53,25 @@ std::string DescribeComponent(const std::string& component) {
   return component;
 }
 
+// Whether an OBJ or PLY file has at least one face (rime-surface writes empty meshes for frames
+// without ice). Reads the OBJ until its first face, or the PLY header.
+bool MeshHasFaces(const fs::path& mesh) {
+  std::ifstream in(mesh, std::ios::binary);
+  std::string line;
+  if (mesh.extension() == ".ply") {
+    while (std::getline(in, line) && line.rfind("end_header", 0) != 0) {
+      std::istringstream words(line);
+      std::string element, name;
+      long long count = 0;
+      if (words >> element >> name >> count && element == "element" && name == "face") return count > 0;
+    }
+    return false;
+  }
+  while (std::getline(in, line))
+    if (line.size() > 1 && line[0] == 'f' && (line[1] == ' ' || line[1] == '\t')) return true;
+  return false;
+}
+
 std::string FrameSuffix(const Job& job) { return job.frame >= 0 ? fmt::format(" on frame {}", job.frame) : std::string(); }
 
 enum class Status { kPending, kRunning, kDone, kFailed, kNotRun };
@@ -111,6 +130,23 @@ struct Runner::Impl {
       Fail(job, kExitStageFailed,
            fmt::format("stage {}{} cannot run: input {} is missing", StageName(job.stage), FrameSuffix(job), verdict.missing_inputs.front()));
       return Status::kFailed;
+    }
+
+    if (job.skip_when_input_mesh_empty && !job.inputs.empty() && !MeshHasFaces(job.inputs.front())) {
+      log::Debug("{}: {} has no triangles, nothing to clean", job.id, job.inputs.front().string());
+      for (const auto& output : job.outputs) {
+        std::error_code ec;
+        fs::remove(output, ec);  // an older cleaned mesh of this frame would no longer match its input
+      }
+      JobRecord record = verdict.fresh;
+      record.outputs.clear();
+      runner.state_.SetRecord(job.id, std::move(record));
+      std::error_code ec;
+      fs::remove(Marker(job), ec);
+      std::lock_guard lock(mutex);
+      ++summary.ran;
+      ++summary.empty;
+      return Status::kDone;
     }
 
     std::vector<std::string> args = job.args;
@@ -214,7 +250,10 @@ Verdict Runner::Evaluate(const Job& job) {
     for (const auto& [name, value] : record->components)
       if (!c.count(name)) v.reasons.push_back(DescribeComponent(name) + " is no longer used");
   }
+  // A frame with nothing to clean was recorded without outputs; its key covers the input mesh.
+  const bool recorded_empty = job.skip_when_input_mesh_empty && record->outputs.empty();
   for (const auto& output : job.outputs) {
+    if (recorded_empty) break;
     const auto hash = state_.ContentHash(output);
     const auto recorded = record->outputs.find(state_.Name(output));
     if (!hash) v.reasons.push_back(fmt::format("output {} is missing", output.string()));
@@ -437,6 +476,10 @@ std::string SummaryTable(const BakeResult& result, bool preview_skipped) {
   }
   out += fmt::format("{:<10} {:>6} {:>7} {:>7} {:>8} {:>9}\n", "total", total.ran, total.cached, total.failed, total.not_run,
                      FormatDuration(result.seconds));
+  for (int s = 0; s < kStageCount; ++s)
+    if (result.stages[s].empty)
+      out += fmt::format("{}: {} of the frames that ran had an empty mesh (no ice yet): nothing to clean, no cleaned file written\n",
+                         StageName(static_cast<Stage>(s)), result.stages[s].empty);
   return out;
 }
 

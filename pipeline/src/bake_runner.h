@@ -28,6 +28,7 @@ struct RunOptions {
 
 struct StageSummary {
   int ran = 0, cached = 0, failed = 0, not_run = 0;
+  int empty = 0;  // of `ran`: frames with an empty input mesh, nothing to clean (tool not run)
   double seconds = 0;  // wall time of the jobs that ran (summed over parallel jobs)
 };
 

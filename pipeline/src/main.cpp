@@ -110,7 +110,7 @@ int main(int argc, char** argv) {
     for (int s = 0; s < kStageCount; ++s) {
       const StageSummary& st = result.stages[s];
       summary["stages"][StageName(static_cast<Stage>(s))] = {
-          {"ran", st.ran}, {"cached", st.cached}, {"failed", st.failed}, {"not_run", st.not_run}, {"seconds", st.seconds}};
+          {"ran", st.ran}, {"empty", st.empty}, {"cached", st.cached}, {"failed", st.failed}, {"not_run", st.not_run}, {"seconds", st.seconds}};
     }
     tool::WriteSummary(common, summary);
     if (result.exit_code == kExitOnlyRefused || result.exit_code == static_cast<int>(ExitCode::kIo)) throw Error(static_cast<ExitCode>(result.exit_code), result.failure);

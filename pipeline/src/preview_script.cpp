@@ -88,7 +88,8 @@ for s in setup["solids"]:
         o.matrix_world = transform_of(s["transform"]) @ o.matrix_world
     assign(objects, SOLID)
 
-assign(import_obj(opts["--ice"], "z"), ICE)
+if os.path.exists(opts["--ice"]):  # frames without ice have no cleaned mesh
+    assign(import_obj(opts["--ice"], "z"), ICE)
 if os.path.exists(opts.get("--water", "")):
     assign(import_obj(opts["--water"], "z"), WATER)
 

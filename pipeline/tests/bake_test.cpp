@@ -72,6 +72,7 @@ class Bake : public ::testing::Test {
     setenv("FAKE_FRAMES", std::to_string(kLastFrame).c_str(), 1);
     unsetenv("FAKE_FAIL");
     unsetenv("FAKE_SIM_SLEEP");
+    unsetenv("FAKE_EMPTY_FRAME");
   }
   void TearDown() override {
     if (!HasFailure()) fs::remove_all(root_);
@@ -207,6 +208,23 @@ TEST_F(Bake, SurfaceOutputsFollowTheSurfacePhaseAndFormats) {
   EXPECT_EQ(RunBake(), 3) << output_;
   EXPECT_NE(output_.find("surface.formats"), std::string::npos) << output_;
   EXPECT_EQ(RunBake("surface"), 0) << output_;
+}
+
+TEST_F(Bake, FrameWithoutIceHasNothingToClean) {
+  setenv("FAKE_EMPTY_FRAME", "0", 1);  // rime-surface writes an empty mesh when a frame has no ice
+  ASSERT_EQ(RunBake(), 0) << output_;
+  EXPECT_EQ(Invocations(), (Counts{{"rime-boundary", 1}, {"rime-sim", 1}, {"rime-surface", kLastFrame + 1}, {"rime-clean", kLastFrame}}))
+      << output_;
+  EXPECT_NE(output_.find("cleanup: 1 of the frames that ran had an empty mesh"), std::string::npos) << output_;
+  EXPECT_FALSE(fs::exists(Out() / "clean/ice_clean.0000.obj"));
+  ASSERT_EQ(RunBake(), 0) << output_;
+  EXPECT_TRUE(Invocations().empty()) << output_;
+  EXPECT_EQ(output_.find("empty mesh"), std::string::npos) << output_;
+  unsetenv("FAKE_EMPTY_FRAME");  // the frame gets ice: now there is something to clean
+  ASSERT_EQ(RunBake("--only surface --frames 0"), 0) << output_;
+  ASSERT_EQ(RunBake(), 0) << output_;
+  EXPECT_EQ(Invocations(), (Counts{{"rime-clean", 1}})) << output_;
+  EXPECT_TRUE(fs::exists(Out() / "clean/ice_clean.0000.obj"));
 }
 
 TEST_F(Bake, RerunWithIdenticalOutputCutsOffDownstream) {

@@ -54,7 +54,8 @@ phases=ice
 if section surface "$scene" | grep -q 'phase *= *"both"'; then phases="ice water"; fi
 for phase in $phases; do
   for ext in vdb obj ply; do
-    { echo "$phase"; cat "$input"; section surface "$scene"; echo "$ext"; } > "$out/$phase.$frame.$ext.tmp"
+    if [ "${FAKE_EMPTY_FRAME:-}" = "$((10#$frame))" ]; then echo "# no triangles" > "$out/$phase.$frame.$ext.tmp"; else
+    { echo "$phase"; cat "$input"; section surface "$scene"; echo "$ext"; echo "f 1 2 3"; } > "$out/$phase.$frame.$ext.tmp"; fi
     mv "$out/$phase.$frame.$ext.tmp" "$out/$phase.$frame.$ext"
   done
 done
