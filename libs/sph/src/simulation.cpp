@@ -6,6 +6,8 @@
 #include <chrono>
 #include <cmath>
 
+#include "rime/boundary/volume_kernels.h"
+#include "rime/boundary/volumes.h"
 #include "rime/core/error.h"
 #include "rime/core/kernel.h"
 #include "rime/core/log.h"
@@ -234,11 +236,10 @@ void Simulation<T>::AddBoundaryObject(const io::ParticleFrame& boundary, const s
 template <class T>
 void Simulation<T>::RecomputeBoundaryVolumes() {
   State& s = *state_;
-  const CubicSpline<T> kernel(T(scene_.fluid.smoothing_length()));
   s.bvol.resize(s.nb());
   s.bpsi.resize(s.nb());
-  exec::ParallelFor(device_, s.nb(), kernels::BoundaryVolume<T>{s.boundary_grid.view(), kernel, T(scene_.fluid.rest_density),
-                                                                nullptr, s.bvol.data(), s.bpsi.data()});
+  boundary::ComputeBoundaryVolumes<T>(device_, s.bx.data(), s.nb(), T(scene_.fluid.smoothing_length()), s.bvol.data());
+  exec::ParallelFor(device_, s.nb(), kernels::Scale<T>{s.bvol.data(), T(scene_.fluid.rest_density), s.bpsi.data()});
 }
 
 template <class T>
@@ -486,8 +487,9 @@ void Simulation<T>::ConvertToIce(const DeviceArray<std::uint32_t>& frozen_list, 
   s.region.SetZero();
   exec::ParallelFor(device_, frozen, kernels::MarkListed{near.offsets.data(), near.indices.data(), s.region.data()});
   const Index dirty = ListFlagged(device_, s.region, s.nb(), s.slot, s.region_list);
-  exec::ParallelFor(device_, dirty, kernels::BoundaryVolume<T>{s.boundary_grid.view(), CubicSpline<T>(support / 2), T(scene_.fluid.rest_density),
-                                                                s.region_list.data(), s.bvol.data(), s.bpsi.data()});
+  exec::ParallelFor(device_, dirty, boundary::kernels::BoundaryVolume<T>{s.boundary_grid.view(), CubicSpline<T>(support / 2), s.bvol.data(),
+                                                                          s.region_list.data()});
+  exec::ParallelFor(device_, s.nb(), kernels::Scale<T>{s.bvol.data(), T(scene_.fluid.rest_density), s.bpsi.data()});
 }
 
 template <class T>

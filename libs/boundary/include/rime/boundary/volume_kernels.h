@@ -13,13 +13,16 @@
 namespace rime::boundary::kernels {
 
 /// volumes[b] = V_b for the grid point b; the grid must be built over the boundary positions with a
-/// cell size of at least 2h.
+/// cell size of at least 2h. With `list`, call k updates only b = list[k] (the simulation's partial
+/// update near new ice).
 template <class T>
 struct BoundaryVolume {
   neighbors::GridView<T> grid;
   CubicSpline<T> kernel;
   T* volumes;
-  RIME_HD void operator()(Index b) const {
+  const std::uint32_t* list = nullptr;
+  RIME_HD void operator()(Index k) const {
+    const Index b = list ? Index(list[k]) : k;
     const Vec3<T> x = grid.points[b];
     T density_number = kernel.W0();  // the particle itself (spec §3: W(0,h) + Σ_{k≠b})
     grid.ForEachNeighbor(x, kernel.SupportRadius(), [&](std::uint32_t k, const Vec3<T>&, T r2) {

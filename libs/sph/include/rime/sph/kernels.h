@@ -362,26 +362,13 @@ struct IntegratePressure {
   }
 };
 
-/// Akinci boundary volume V_b = 1/(W0 + Σ_k W_bk) over all boundary particles (spec §3), Ψ_b = ρ0 V_b.
-/// With `list`, only the listed particles are updated (those near a change of the boundary set).
+/// out[i] = factor * in[i] (Ψ_b = ρ0 V_b).
 template <class T>
-struct BoundaryVolume {
-  neighbors::GridView<T> grid;
-  CubicSpline<T> kernel;
-  T rest_density;
-  const std::uint32_t* list;  // nullptr: every boundary particle
-  T* volume;
-  T* psi;
-  RIME_HD void operator()(Index k) const {
-    const std::uint32_t b = list ? list[k] : static_cast<std::uint32_t>(k);
-    T sum = kernel.W0();
-    const Vec3<T> xb = grid.points[b];
-    grid.ForEachNeighbor(xb, kernel.SupportRadius(), [&](std::uint32_t k, const Vec3<T>&, T r2) {
-      if (k != b) sum += kernel.W(std::sqrt(r2));
-    });
-    volume[b] = T(1) / sum;
-    psi[b] = rest_density / sum;
-  }
+struct Scale {
+  const T* in;
+  T factor;
+  T* out;
+  RIME_HD void operator()(Index i) const { out[i] = factor * in[i]; }
 };
 
 /// out[i] = ‖v_i‖² (for the CFL condition and the divergence check).
@@ -461,7 +448,7 @@ struct CompactionOrder {
   X(rime::sph::kernels::AirPressureAcceleration<T>) X(rime::sph::kernels::AdvectVelocity<T>)                       \
   X(rime::sph::kernels::PredictAdvection<T>) X(rime::sph::kernels::DisplacementSum<T>)                             \
   X(rime::sph::kernels::PressureUpdate<T>) X(rime::sph::kernels::IntegratePressure<T>)                             \
-  X(rime::sph::kernels::SquaredSpeed<T>) X(rime::sph::kernels::BoundaryVolume<T>) X(rime::sph::kernels::MoveBoundary<T>) X(rime::sph::kernels::InsideDomain<T>) \
+  X(rime::sph::kernels::SquaredSpeed<T>) X(rime::sph::kernels::Scale<T>) X(rime::sph::kernels::MoveBoundary<T>) X(rime::sph::kernels::InsideDomain<T>) \
   X(rime::sph::kernels::Gather<T>) X(rime::sph::kernels::Gather<rime::Vec3<T>>) X(rime::sph::kernels::Gather<rime::freeze::Sym6<T>>)
 
 #define RIME_SPH_KERNELS(X)                                                                        \
