@@ -533,7 +533,7 @@ Result Reconstruct(const ParticleSet& particles, const Settings& settings) {
   if (particles.size() == 0) return result;
 
   auto t0 = Clock::now();
-  const PreparedParticles prepared = Prepare(particles, settings, dx);
+  PreparedParticles prepared = Prepare(particles, settings, dx);
   stats.seconds_prepare = Seconds(t0);
 
   t0 = Clock::now();
@@ -543,7 +543,7 @@ Result Reconstruct(const ParticleSet& particles, const Settings& settings) {
   const std::vector<float> reach = ReachVoxels(particles, settings, &prepared, dx, rho, band, float(h / dx));
   std::vector<Vec3d> world(particles.size());
   exec::cpu::ParallelFor(Index(particles.size()), [&](Index i) { world[i] = prepared.origin + Vec3d(prepared.centers[i]); });
-  const Plan plan = MakePlan(world, reach, dx);
+  Plan plan = MakePlan(world, reach, dx);
   world = {};
 
   FieldInputs in;
@@ -561,6 +561,9 @@ Result Reconstruct(const ParticleSet& particles, const Settings& settings) {
   const double t_plan = Seconds(t0);
   RasterOutput raster = Rasterize(plan, in, want_velocity ? &particles.velocities : nullptr);
   const double t_raster = Seconds(t0);
+  const std::size_t planned_leaves = plan.targets.size();
+  plan = Plan{};  // particle-side arrays are not needed any more: free them before meshing
+  prepared = PreparedParticles{};
   if (!settings.keep_voids)
     stats.filled_void_voxels = FillEnclosedVoids(*raster.surface, *raster.inside, *raster.shallow_outside, *raster.far_outside, float(dx));
   raster.shallow_outside.reset();
@@ -570,7 +573,7 @@ Result Reconstruct(const ParticleSet& particles, const Settings& settings) {
   raster.inside.reset();
   openvdb::tools::pruneLevelSet(*raster.surface);
   log::Debug("rasterize {} particles: plan {:.3f} s ({} leaves), field {:.3f} s, voids {:.3f} s ({} voxels), band+prune {:.3f} s",
-             particles.size(), t_plan, plan.targets.size(), t_raster - t_plan, t_voids - t_raster, stats.filled_void_voxels,
+             particles.size(), t_plan, planned_leaves, t_raster - t_plan, t_voids - t_raster, stats.filled_void_voxels,
              Seconds(t0) - t_voids);
   auto& grid = result.grids->surface;
   grid->setTree(raster.surface);

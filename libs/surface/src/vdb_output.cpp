@@ -5,6 +5,7 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <numeric>
 
 #include "grids.h"
@@ -44,23 +45,23 @@ std::uint64_t DropVoidShells(io::TriMesh& mesh) {
   for (std::size_t v = 0; v < nv; ++v)
     if (sets.Find(std::uint32_t(v)) == v && volume[v] < 0) ++dropped;
   if (dropped == 0) return 0;
-  std::vector<std::array<std::uint32_t, 3>> kept;
-  kept.reserve(mesh.triangles.size());
-  for (const auto& t : mesh.triangles)
-    if (volume[sets.Find(t[0])] >= 0) kept.push_back(t);
-  // Compact the vertex arrays.
-  std::vector<std::uint32_t> remap(nv, ~0u);
-  io::TriMesh out;
-  for (auto& t : kept)
+  // Filter and compact in place (these meshes can hold tens of millions of triangles).
+  auto& tris = mesh.triangles;
+  tris.erase(std::remove_if(tris.begin(), tris.end(), [&](const auto& t) { return volume[sets.Find(t[0])] < 0; }), tris.end());
+  std::vector<double>().swap(volume);
+  std::vector<std::uint32_t>& remap = sets.parent;  // reuse: old vertex -> new vertex
+  std::fill(remap.begin(), remap.end(), ~0u);
+  std::uint32_t next = 0;
+  for (auto& t : tris)
     for (auto& v : t) {
-      if (remap[v] == ~0u) {
-        remap[v] = std::uint32_t(out.positions.size());
-        out.positions.push_back(mesh.positions[v]);
-      }
+      if (remap[v] == ~0u) remap[v] = next++;
       v = remap[v];
     }
-  out.triangles = std::move(kept);
-  mesh = std::move(out);
+  std::vector<Vec3f> positions(next);
+  for (std::size_t v = 0; v < nv; ++v)
+    if (remap[v] != ~0u) positions[remap[v]] = mesh.positions[v];
+  mesh.positions = std::move(positions);
+  tris.shrink_to_fit();
   return dropped;
 }
 
@@ -88,13 +89,16 @@ std::uint64_t ExtractMesh(const openvdb::FloatGrid& grid, bool keep_voids, io::T
   mesh = {};
   mesh.positions.resize(points.size());
   for (std::size_t i = 0; i < points.size(); ++i) mesh.positions[i] = Vec3f(points[i].x(), points[i].y(), points[i].z());
+  std::vector<openvdb::Vec3s>().swap(points);  // free as we go: meshes of tens of millions of triangles
   mesh.triangles.reserve(triangles.size() + 2 * quads.size());
   // volumeToMesh winds clockwise seen from outside: reverse (LIBRARY_NOTES.md).
   for (const auto& t : triangles) mesh.triangles.push_back({t[2], t[1], t[0]});
+  std::vector<openvdb::Vec3I>().swap(triangles);
   for (const auto& q : quads) {
     mesh.triangles.push_back({q[2], q[1], q[0]});
     mesh.triangles.push_back({q[3], q[2], q[0]});
   }
+  std::vector<openvdb::Vec4I>().swap(quads);
   const std::uint64_t dropped = keep_voids ? 0 : DropVoidShells(mesh);
   ComputeNormals(mesh);
   return dropped;

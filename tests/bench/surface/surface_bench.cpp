@@ -2,7 +2,7 @@
 // voxel = spacing / 2, anisotropic ellipsoids (stored D), against OpenVDB's isotropic
 // ParticlesToLevelSet + volumeToMesh on the same particles.
 //
-// Usage: rime_surface_bench [--sizes 50000,500000,2000000] [--runs 3] [--openvdb] [--json FILE]
+// Usage: rime_surface_bench [--sizes 50000,500000,2000000] [--runs 3] [--sheet] [--openvdb] [--json FILE]
 // Peak memory is measured in a child process per case (fork), so cases do not inherit each
 // other's peaks.
 #include <openvdb/openvdb.h>
@@ -34,10 +34,24 @@ namespace {
 
 constexpr double kSpacing = 0.02;
 
-// A jittered lattice ball of about n particles (a dense ice body), D from the PCA as stored at freezing.
-surface::ParticleSet IceBall(std::size_t n) {
+// A jittered lattice ball of about n particles (a dense ice body) or a two-layer sheet (a glaze
+// coat), with D from the PCA as stored at freezing.
+surface::ParticleSet IceShape(std::size_t n, bool sheet) {
   surface::ParticleSet set;
   set.spacing = kSpacing;
+  if (sheet) {
+    const int side = int(std::sqrt(double(n) / 2));
+    std::mt19937 rng(42);
+    std::uniform_real_distribution<double> jitter(-0.05, 0.05);
+    for (int i = 0; i < side; ++i)
+      for (int j = 0; j < side; ++j)
+        for (int k = 0; k < 2; ++k)
+          set.positions.push_back(Vec3d(i + jitter(rng), j + jitter(rng), k + jitter(rng)) * kSpacing);
+    surface::Settings settings;
+    settings.lambda = 0;
+    set.stored_anisotropy = surface::Prepare(set, settings, kSpacing / 2).D;
+    return set;
+  }
   const double radius = std::cbrt(3.0 * double(n) / (4 * M_PI)) * kSpacing;
   const int half = int(std::ceil(radius / kSpacing));
   std::mt19937 rng(42);
@@ -147,6 +161,7 @@ int main(int argc, char** argv) {
   int runs = 3;
   bool openvdb_baseline = false;
   std::string json_path = "surface_bench.json";
+  bool sheet = false;
   for (int a = 1; a < argc; ++a) {
     const std::string arg = argv[a];
     if (arg == "--sizes" && a + 1 < argc) {
@@ -159,22 +174,24 @@ int main(int argc, char** argv) {
       }
     } else if (arg == "--runs" && a + 1 < argc) {
       runs = std::stoi(argv[++a]);
+    } else if (arg == "--sheet") {
+      sheet = true;
     } else if (arg == "--openvdb") {
       openvdb_baseline = true;
     } else if (arg == "--json" && a + 1 < argc) {
       json_path = argv[++a];
     } else {
-      std::fprintf(stderr, "usage: %s [--sizes N,N,...] [--runs R] [--openvdb] [--json FILE]\n", argv[0]);
+      std::fprintf(stderr, "usage: %s [--sizes N,N,...] [--runs R] [--sheet] [--openvdb] [--json FILE]\n", argv[0]);
       return 2;
     }
   }
   const int threads = tbb::info::default_concurrency();
   nlohmann::json results = nlohmann::json::array();
-  std::printf("threads: %d, voxel = spacing/2, shape: jittered ice ball, median of %d runs (by wall time); M/cpu-s = particles per CPU-second (user+sys, robust to a shared machine)\n", threads, runs);
+  std::printf("threads: %d, voxel = spacing/2, shape: %s, median of %d runs (by wall time); M/cpu-s = particles per CPU-second (user+sys, robust to a shared machine)\n", threads, sheet ? "jittered two-layer ice sheet" : "jittered ice ball", runs);
   std::printf("%-24s %10s %9s %9s %9s %9s %10s %12s %11s %10s\n", "method", "particles", "wall s", "field s", "mesh s", "cpu s",
               "M part/s", "M/cpu-s", "triangles", "peak MB");
   for (std::size_t n : sizes) {
-    const surface::ParticleSet set = IceBall(n);
+    const surface::ParticleSet set = IceShape(n, sheet);
     for (int method = 0; method < (openvdb_baseline ? 2 : 1); ++method) {
       std::vector<Measure> measures;
       std::uint64_t peak = 0;
@@ -209,6 +226,7 @@ int main(int argc, char** argv) {
                          {"triangles", m.triangles},
                          {"active_voxels", m.active_voxels},
                          {"peak_memory_bytes", peak},
+                         {"shape", sheet ? "two-layer sheet" : "ball"},
                          {"note", "peak memory includes the generated particle set (~100 bytes/particle)"}});
     }
   }
