@@ -510,7 +510,10 @@ std::uint64_t EstimateMemoryBytes(const ParticleSet& particles, const Settings& 
     v->erase(std::unique(v->begin(), v->end()), v->end());
   }
   const double node_bytes = upper1.size() * 4096 * 12.0 + upper2.size() * 32768 * 12.0;
-  return std::uint64_t(plan.targets.size() * leaf_bytes * 1.5 + node_bytes * 2 + n * particle_bytes);
+  // The mesh and OpenVDB's meshing buffers: measured 45 (dense ball) to 250 (two-layer sheet)
+  // triangles per leaf at about 50 bytes each with vertices, normals and temporaries.
+  const double mesh_bytes = settings.mesh ? plan.targets.size() * 12000.0 : 0.0;
+  return std::uint64_t(plan.targets.size() * leaf_bytes * 1.5 + node_bytes * 2 + n * particle_bytes + mesh_bytes);
 }
 
 Result Reconstruct(const ParticleSet& particles, const Settings& settings) {
