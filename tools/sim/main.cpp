@@ -52,7 +52,9 @@ int Run(const rime::io::Scene& scene, const Options& opt, const rime::tool::Comm
   using namespace rime;
   const exec::Device device = exec::SelectDevice(common.device);
   sph::Simulation<T> sim(scene, device);
-  const fs::path boundary_dir = opt.boundary_dir.empty() ? fs::path(opt.output) / ".." / "boundary" : fs::path(opt.boundary_dir);
+  // Default: the "boundary" folder beside the output folder (how rime-bake lays out its cache).
+  const fs::path boundary_dir =
+      opt.boundary_dir.empty() ? fs::path(opt.output).lexically_normal().parent_path() / "boundary" : fs::path(opt.boundary_dir);
   for (const io::SolidObject& solid : scene.solids) {
     const fs::path file = boundary_dir / (solid.name + ".h5part");
     if (!fs::exists(file))

@@ -125,4 +125,28 @@ TEST_F(SimTool, CudaWithoutGpuIsRefused) {
   EXPECT_EQ(fallback.code, 0) << fallback.output;
 }
 
+// ParaView 5.11's H5Part reader opens a frame on its own and the index as a timed sequence.
+TEST_F(SimTool, ParaViewOpensFramesAndTheSequence) {
+  if (Exec("command -v pvpython").code != 0) GTEST_SKIP() << "pvpython not installed (Debian packages paraview + python3-paraview): not checked";
+  const fs::path scene = WriteScene("", 0.1);
+  MakeBoundary(scene);
+  ASSERT_EQ(Exec(Sim(scene, "sim")).code, 0);
+  const fs::path script = dir_ / "check.py";
+  std::ofstream(script) << "from paraview.simple import *\n"
+                        << "r = H5PartReader(FileName='" << (dir_ / "sim" / "particles.0002.h5part").string() << "')\n"
+                        << "r.UpdatePipeline()\n"
+                        << "print('points', r.GetDataInformation().GetNumberOfPoints())\n"
+                        << "print('arrays', sorted(r.PointData.keys()))\n"
+                        << "s = H5PartReader(FileName='" << (dir_ / "sim" / "particles.h5part").string() << "')\n"
+                        << "s.UpdatePipelineInformation()\n"
+                        << "print('times', ' '.join('%.6f' % t for t in s.TimestepValues))\n";
+  const Result r = Exec("timeout 120 pvpython " + script.string());
+  ASSERT_EQ(r.code, 0) << r.output;
+  const auto frame = rime::io::ReadParticleFrame(dir_ / "sim" / "particles.0002.h5part");
+  EXPECT_NE(r.output.find("points " + std::to_string(frame.size())), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("'phase'"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("'pressure'"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("times 0.000000 0.033333 0.066667 0.100000"), std::string::npos) << r.output;
+}
+
 }  // namespace
