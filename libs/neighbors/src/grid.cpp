@@ -29,6 +29,16 @@ UniformGrid<T>::UniformGrid(const exec::Device& device)
 
 template <class T>
 void UniformGrid<T>::Build(const Vec3<T>* points, Index n, T cell_size) {
+  BuildImpl(points, n, cell_size, nullptr);
+}
+
+template <class T>
+void UniformGrid<T>::Build(const Vec3<T>* points, Index n, T cell_size, const Vec3<T>& origin) {
+  BuildImpl(points, n, cell_size, &origin);
+}
+
+template <class T>
+void UniformGrid<T>::BuildImpl(const Vec3<T>* points, Index n, T cell_size, const Vec3<T>* fixed_origin) {
   if (!(cell_size > 0)) throw Error(ExitCode::kFailure, "neighbor grid: cell size must be positive");
   cell_size_ = cell_size;
   view_ = GridView<T>{};
@@ -52,8 +62,13 @@ void UniformGrid<T>::Build(const Vec3<T>* points, Index n, T cell_size) {
     throw Error(ExitCode::kBadInput, fmt::format("particles span {:.4g} m, more than 2^21 neighbor cells of {:.4g} m per axis; "
                                                  "limit the domain or use a larger spacing",
                                                  double(extent), double(cell_size)));
-  view_.origin = {std::floor(lo.x / cell_size) * cell_size - cell_size, std::floor(lo.y / cell_size) * cell_size - cell_size,
-                  std::floor(lo.z / cell_size) * cell_size - cell_size};
+  const bool use_fixed = fixed_origin && lo.x > fixed_origin->x && lo.y > fixed_origin->y && lo.z > fixed_origin->z &&
+                         (hi.x - fixed_origin->x) / cell_size < T(kMaxCellsPerAxis - 4) &&
+                         (hi.y - fixed_origin->y) / cell_size < T(kMaxCellsPerAxis - 4) &&
+                         (hi.z - fixed_origin->z) / cell_size < T(kMaxCellsPerAxis - 4);
+  view_.origin = use_fixed ? *fixed_origin
+                           : Vec3<T>{std::floor(lo.x / cell_size) * cell_size - cell_size, std::floor(lo.y / cell_size) * cell_size - cell_size,
+                                     std::floor(lo.z / cell_size) * cell_size - cell_size};
 
   keys_.resize(n);
   sorted_index_.resize(n);
@@ -102,6 +117,26 @@ void UniformGrid<T>::Query(const Vec3<T>* queries, Index m, T radius, bool exclu
   if (total > 0xffffffffULL) throw Error(ExitCode::kFailure, "neighbor grid: more than 2^32 neighbor pairs");
   out.indices.resize(total);
   exec::ParallelFor(device_, m, kernels::FillNeighbors<T>{view_, queries, radius, exclude_self, out.offsets.data(), out.indices.data()});
+}
+
+template <class T>
+void UniformGrid<T>::QueryGrid(const UniformGrid& queries, T radius, bool exclude_self, NeighborList& out) const {
+  const Index m = queries.size();
+  if (!aligned_with(queries) || view_.count == 0 || m == 0) {
+    Query(queries.view_.points, m, radius, exclude_self, out);
+    return;
+  }
+  if (radius > cell_size_ * T(1.0000001)) throw Error(ExitCode::kFailure, "neighbor grid: query radius exceeds the cell size");
+  out.offsets.resize(m + 1);
+  counts_.resize(m + 1);
+  counts_.SetZero();
+  const Index cells = static_cast<Index>(queries.cell_count());
+  exec::ParallelFor(device_, cells, kernels::CountNeighborsByCell<T>{view_, queries.view_, radius, exclude_self, counts_.data()});
+  const std::uint64_t total = exec::ExclusiveScan(device_, counts_.data(), out.offsets.data(), m + 1);
+  if (total > 0xffffffffULL) throw Error(ExitCode::kFailure, "neighbor grid: more than 2^32 neighbor pairs");
+  out.indices.resize(total);
+  exec::ParallelFor(device_, cells,
+                    kernels::FillNeighborsByCell<T>{view_, queries.view_, radius, exclude_self, out.offsets.data(), out.indices.data()});
 }
 
 template class UniformGrid<float>;

@@ -98,3 +98,46 @@ TEST(UniformGrid, RejectsNaNAndHugeExtents) {
 
 }  // namespace
 }  // namespace rime::neighbors
+
+namespace rime::neighbors {
+namespace {
+
+// Cell-by-cell queries between grids on one lattice give exactly the per-point lists.
+TEST(UniformGrid, QueryGridMatchesQuery) {
+  std::mt19937 rng(77);
+  const exec::Device device = exec::Device::Cpu();
+  for (bool clustered : {false, true}) {
+    const auto a = RandomCloud<float>(4000, clustered, 0.0f, rng);
+    const auto b = RandomCloud<float>(3000, clustered, 0.0f, rng);
+    exec::DeviceArray<Vec3f> da(device, a), db(device, b);
+    const float cell = 0.05f;
+    const Vec3f origin(-1.0f, -1.0f, -1.0f);
+    for (bool aligned : {true, false}) {
+      UniformGrid<float> ga(device), gb(device);
+      ga.Build(da.data(), Index(a.size()), cell, origin);
+      if (aligned)
+        gb.Build(db.data(), Index(b.size()), cell, origin);
+      else
+        gb.Build(db.data(), Index(b.size()), cell);
+      EXPECT_EQ(ga.aligned_with(gb), aligned);
+      for (bool self : {true, false}) {
+        const UniformGrid<float>& target = self ? ga : gb;
+        NeighborList by_cell(device), by_point(device);
+        target.QueryGrid(ga, cell, self, by_cell);
+        target.Query(da.data(), Index(a.size()), cell, self, by_point);
+        ASSERT_EQ(by_cell.offsets.ToHost(), by_point.offsets.ToHost());
+        auto x = by_cell.indices.ToHost(), y = by_point.indices.ToHost();
+        const auto off = by_cell.offsets.ToHost();
+        for (std::size_t i = 0; i + 1 < off.size(); ++i) {  // same sets per row (order may differ across the two paths)
+          std::sort(x.begin() + off[i], x.begin() + off[i + 1]);
+          std::sort(y.begin() + off[i], y.begin() + off[i + 1]);
+        }
+        EXPECT_EQ(x, y) << "clustered=" << clustered << " aligned=" << aligned << " self=" << self;
+        EXPECT_GT(by_cell.pairs(), 0u);
+      }
+    }
+  }
+}
+
+}  // namespace
+}  // namespace rime::neighbors

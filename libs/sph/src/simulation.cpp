@@ -250,7 +250,7 @@ void Simulation<T>::UpdateBoundaryMotion(double t) {
   for (const ObjectMotion& m : s.object_motions) motions.push_back(m.At<T>(t));
   s.motions.assign(motions);
   exec::ParallelFor(device_, s.nb(), kernels::MoveBoundary<T>{s.blocal.data(), s.bobject.data(), s.motions.data(), s.bx.data(), s.bv.data()});
-  s.boundary_grid.Build(s.bx.data(), s.nb(), T(2 * scene_.fluid.smoothing_length()));
+  s.boundary_grid.Build(s.bx.data(), s.nb(), T(2 * scene_.fluid.smoothing_length()), lattice_origin_);
 }
 
 template <class T>
@@ -337,6 +337,14 @@ void Simulation<T>::Initialize() {
   s.pressure_previous.resize(x.size());
   s.pressure_previous.SetZero();
   ComputeDomain(x);
+  // One cell lattice for the water and boundary grids, so that neighbor searches run cell by cell.
+  {
+    Vec3<T> lo = domain_min_;
+    for (const Vec3<T>& p : BoundaryPositions()) lo = Min(lo, p);
+    lattice_origin_ = {std::floor(lo.x / support) * support - support, std::floor(lo.y / support) * support - support,
+                       std::floor(lo.z / support) * support - support};
+    if (s.nb() > 0) s.boundary_grid.Build(s.bx.data(), s.nb(), support, lattice_origin_);
+  }
   if (modules_.Enabled("freezing")) {
     for (auto* a : {&s.growth_valid, &s.ice_kind}) {
       a->resize(s.nb());
@@ -478,7 +486,7 @@ void Simulation<T>::ConvertToIce(const DeviceArray<std::uint32_t>& frozen_list, 
   // The boundary set changed: re-index it and recompute the volumes of every boundary particle
   // within 2h of new ice, the new ice included (spec §3, §9.7).
   const T support = T(2 * scene_.fluid.smoothing_length());
-  s.boundary_grid.Build(s.bx.data(), s.nb(), support);
+  s.boundary_grid.Build(s.bx.data(), s.nb(), support, lattice_origin_);
   s.bvol.resize(s.nb());
   s.bpsi.resize(s.nb());
   neighbors::NeighborList near(device_);
@@ -545,7 +553,7 @@ void Simulation<T>::NeighborSearch() {
   State& s = *state_;
   const Index n = s.n();
   const T support = T(2 * scene_.fluid.smoothing_length());
-  s.fluid_grid.Build(s.x.data(), n, support);
+  s.fluid_grid.Build(s.x.data(), n, support, lattice_origin_);
   // Reorder the persistent fluid state along the grid's Z curve for cache locality.
   s.order.resize(n);
   exec::CopyOnDevice(device_, s.order.data(), s.fluid_grid.order(), n * sizeof(std::uint32_t));
@@ -556,11 +564,11 @@ void Simulation<T>::NeighborSearch() {
   s.fluid_grid.AdoptOrder(s.x.data());
 
   const CubicSpline<T> kernel(T(scene_.fluid.smoothing_length()));
-  s.fluid_grid.Query(s.x.data(), n, support, true, s.ff);
+  s.fluid_grid.QueryGrid(s.fluid_grid, support, true, s.ff);
   s.ff_w.resize(s.ff.pairs());
   s.ff_grad.resize(s.ff.pairs());
   exec::ParallelFor(device_, n, kernels::PairValues<T>{s.x.data(), s.x.data(), s.ff.offsets.data(), s.ff.indices.data(), kernel, s.ff_w.data(), s.ff_grad.data()});
-  s.boundary_grid.Query(s.x.data(), n, support, false, s.fb);
+  s.boundary_grid.QueryGrid(s.fluid_grid, support, false, s.fb);
   s.fb_w.resize(s.fb.pairs());
   s.fb_grad.resize(s.fb.pairs());
   exec::ParallelFor(device_, n, kernels::PairValues<T>{s.x.data(), s.bx.data(), s.fb.offsets.data(), s.fb.indices.data(), kernel, s.fb_w.data(), s.fb_grad.data()});
@@ -1063,7 +1071,7 @@ void Simulation<T>::Restore(const io::ParticleFrame& f) {
       Append(device_, s.ice_time, itime);
       Append(device_, s.ice_d, id6);
       s.ice_count = Index(ix.size());
-      s.boundary_grid.Build(s.bx.data(), s.nb(), T(2 * scene_.fluid.smoothing_length()));
+      s.boundary_grid.Build(s.bx.data(), s.nb(), T(2 * scene_.fluid.smoothing_length()), lattice_origin_);
       RecomputeBoundaryVolumes();
     }
   }

@@ -33,6 +33,13 @@ class UniformGrid {
   /// Bins `points` (device pointer, must stay valid while the grid is used) in cells of
   /// size `cell_size`. Throws rime::Error if the cloud spans more than 2^21 cells per axis.
   void Build(const Vec3<T>* points, Index n, T cell_size);
+  /// The same on a fixed cell lattice: grids built on the same origin and cell size share their
+  /// cells, which lets QueryGrid work cell by cell. Falls back to a computed origin (and says so
+  /// through aligned_with) when a point lies below `origin`.
+  void Build(const Vec3<T>* points, Index n, T cell_size, const Vec3<T>& origin);
+  bool aligned_with(const UniformGrid& other) const {
+    return view_.origin == other.view_.origin && cell_size_ == other.cell_size_;
+  }
 
   /// sorted slot -> original index: the Z-curve order, for callers that reorder their arrays.
   const std::uint32_t* order() const { return sorted_index_.data(); }
@@ -47,8 +54,14 @@ class UniformGrid {
 
   /// CSR lists of grid points within `radius` (<= cell size) of each query position.
   void Query(const Vec3<T>* queries, Index m, T radius, bool exclude_self, NeighborList& out) const;
+  /// The same for the points of another grid as queries (row i = its point i). When both grids
+  /// share their cell lattice the search runs per query cell, looking up the 27 neighbor cells
+  /// once for all points of the cell (several times faster on the CPU); identical lists either way.
+  void QueryGrid(const UniformGrid& queries, T radius, bool exclude_self, NeighborList& out) const;
 
  private:
+  void BuildImpl(const Vec3<T>* points, Index n, T cell_size, const Vec3<T>* fixed_origin);
+
   exec::Device device_;
   T cell_size_ = 0;
   std::size_t cells_ = 0;

@@ -207,6 +207,81 @@ struct FillNeighbors {
   }
 };
 
+/// The up to 27 occupied cells of `target` around one cell of `source` (grids of the same cell
+/// size on the same origin), gathered once for all points of the source cell.
+template <class T>
+struct CellNeighborhood {
+  std::uint32_t begin[27], end[27];
+  int count = 0;
+  RIME_HDI CellNeighborhood(const GridView<T>& target, const GridView<T>& source, std::uint32_t cell) {
+    const T size = T(1) / source.inv_cell;
+    const Vec3<T> p = source.points[source.sorted_index[source.cell_start[cell]]];
+    const Vec3<T> center(source.origin.x + (T(source.CellCoord(p.x, source.origin.x)) + T(0.5)) * size,
+                         source.origin.y + (T(source.CellCoord(p.y, source.origin.y)) + T(0.5)) * size,
+                         source.origin.z + (T(source.CellCoord(p.z, source.origin.z)) + T(0.5)) * size);
+    // Neighbor cells are at most half a cell from the centre, the next ring 1.5 cells: keep 27.
+    target.ForEachCandidateCell(center, size, [&](std::uint32_t b, std::uint32_t e) {
+      begin[count] = b;
+      end[count] = e;
+      ++count;
+    });
+  }
+};
+
+/// counts[i] for every point i of one source cell (see CountNeighbors; same results).
+template <class T>
+struct CountNeighborsByCell {
+  GridView<T> target, source;
+  T radius;
+  bool exclude_self;
+  std::uint32_t* counts;
+  RIME_HD void operator()(Index cell) const {
+    const CellNeighborhood<T> hood(target, source, static_cast<std::uint32_t>(cell));
+    const T r2max = radius * radius;
+    for (std::uint32_t s = source.cell_start[cell], e = source.cell_start[cell + 1]; s < e; ++s) {
+      const std::uint32_t i = source.sorted_index[s];
+      const Vec3<T> x = source.points[i];
+      const std::uint32_t self = exclude_self ? i : ~0u;
+      std::uint32_t c = 0;
+      for (int k = 0; k < hood.count; ++k)
+        for (std::uint32_t t = hood.begin[k]; t < hood.end[k]; ++t) {
+          const std::uint32_t j = target.sorted_index[t];
+          const Vec3<T> r = x - target.points[j];
+          c += (Dot(r, r) < r2max) & (j != self);
+        }
+      counts[i] = c;
+    }
+  }
+};
+
+/// Neighbor indices for every point of one source cell (same order as FillNeighbors).
+template <class T>
+struct FillNeighborsByCell {
+  GridView<T> target, source;
+  T radius;
+  bool exclude_self;
+  const std::uint32_t* offsets;
+  std::uint32_t* indices;
+  RIME_HD void operator()(Index cell) const {
+    const CellNeighborhood<T> hood(target, source, static_cast<std::uint32_t>(cell));
+    const T r2max = radius * radius;
+    for (std::uint32_t s = source.cell_start[cell], e = source.cell_start[cell + 1]; s < e; ++s) {
+      const std::uint32_t i = source.sorted_index[s];
+      const Vec3<T> x = source.points[i];
+      const std::uint32_t self = exclude_self ? i : ~0u;
+      std::uint32_t k_out = offsets[i];
+      const std::uint32_t end = offsets[i + 1];
+      for (int k = 0; k < hood.count; ++k)
+        for (std::uint32_t t = hood.begin[k]; t < hood.end[k]; ++t) {
+          const std::uint32_t j = target.sorted_index[t];
+          const Vec3<T> r = x - target.points[j];
+          if (k_out < end) indices[k_out] = j;
+          k_out += (Dot(r, r) < r2max) & (j != self);
+        }
+    }
+  }
+};
+
 /// Component-wise copy for bounding-box reductions: out[a*n + i] = -points[i][a] (a < 3) and
 /// points[i][a-3] (a >= 3), so one Max over each third gives -min and max.
 template <class T>
@@ -229,4 +304,6 @@ struct BoundsComponents {
   X(rime::neighbors::kernels::MarkCellStarts) X(rime::neighbors::kernels::InsertCells)              \
   X(rime::neighbors::kernels::CountNeighbors<float>) X(rime::neighbors::kernels::CountNeighbors<double>) \
   X(rime::neighbors::kernels::FillNeighbors<float>) X(rime::neighbors::kernels::FillNeighbors<double>)   \
-  X(rime::neighbors::kernels::BoundsComponents<float>) X(rime::neighbors::kernels::BoundsComponents<double>)
+  X(rime::neighbors::kernels::BoundsComponents<float>) X(rime::neighbors::kernels::BoundsComponents<double>)         \
+  X(rime::neighbors::kernels::CountNeighborsByCell<float>) X(rime::neighbors::kernels::CountNeighborsByCell<double>) \
+  X(rime::neighbors::kernels::FillNeighborsByCell<float>) X(rime::neighbors::kernels::FillNeighborsByCell<double>)

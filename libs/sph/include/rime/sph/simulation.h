@@ -124,6 +124,7 @@ class Simulation {
   std::vector<double> emitter_travel_;  // distance travelled since each emitter's last layer, m
   std::vector<std::string> object_names_;
   Vec3<T> domain_min_{}, domain_max_{};  // particles leaving this box are removed
+  Vec3<T> lattice_origin_{};              // shared origin of the water and boundary grids
   bool initialized_ = false;
 };
 
