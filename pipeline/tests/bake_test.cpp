@@ -1,5 +1,6 @@
 // rime-bake's decisions (what is stale, what runs, what it reports), tested by running the real
 // rime-bake binary on fake stage tools (fake_tools.h) that log every invocation.
+#include <cstdlib>
 #include <gtest/gtest.h>
 #include <signal.h>
 #include <spawn.h>
@@ -133,7 +134,8 @@ TEST_F(Bake, FirstRunBakesEverythingAndSecondRunExecutesNothing) {
   EXPECT_TRUE(fs::exists(Out() / "cache/.rime-bake/state.json"));
   EXPECT_TRUE(fs::is_empty(Out() / "cache/.rime-bake/incomplete"));
   EXPECT_NE(output_.find("cleanup"), std::string::npos) << "summary table expected:\n" << output_;
-  EXPECT_NE(output_.find("preview stage skipped: blender is not on PATH"), std::string::npos) << output_;
+  if (std::system("command -v blender > /dev/null 2>&1") != 0)
+    EXPECT_NE(output_.find("preview stage skipped: blender is not on PATH"), std::string::npos) << output_;
 
   ASSERT_EQ(RunBake(), 0) << output_;
   EXPECT_TRUE(Invocations().empty()) << output_;
