@@ -25,6 +25,28 @@ std::unique_ptr<Simulation<T>> MakeColumn(io::Scene scene, int nx, int ny, int n
   return sim;
 }
 
+// Fluid–fluid neighbor lists with kernel values for a cloud without boundaries (kernel tests).
+struct FluidOnlyPairs {
+  FluidOnlyPairs(const exec::DeviceArray<Vec3d>& x, double h)
+      : kernel(h), ff(exec::Device::Cpu()), fb(exec::Device::Cpu()), w(exec::Device::Cpu()), grad(exec::Device::Cpu()) {
+    const Index n = Index(x.size());
+    neighbors::UniformGrid<double> grid(exec::Device::Cpu());
+    grid.Build(x.data(), n, 2 * h);
+    grid.Query(x.data(), n, 2 * h, true, ff);
+    fb.offsets.resize(n + 1);
+    fb.offsets.SetZero();
+    w.resize(ff.pairs());
+    grad.resize(ff.pairs());
+    exec::cpu::ParallelFor(n, kernels::PairValues<double>{x.data(), x.data(), ff.offsets.data(), ff.indices.data(), kernel, w.data(), grad.data()});
+  }
+  Pairs<double> FF() const { return {ff.offsets.data(), ff.indices.data(), w.data(), grad.data()}; }
+  Pairs<double> FB() const { return {fb.offsets.data(), nullptr, nullptr, nullptr}; }
+  CubicSpline<double> kernel;
+  neighbors::NeighborList ff, fb;
+  exec::DeviceArray<double> w;
+  exec::DeviceArray<Vec3d> grad;
+};
+
 template <class T>
 double MaxSpeed(const Simulation<T>& sim) {
   double m = 0;
@@ -122,18 +144,9 @@ TEST(Iisph, PairwiseModulesConserveMomentum) {
   const Index n = Index(x.size());
   const exec::Device cpu = exec::Device::Cpu();
   exec::DeviceArray<Vec3d> dx(cpu, x), dv(cpu, v);
-  neighbors::UniformGrid<double> grid(cpu);
-  grid.Build(dx.data(), n, 2 * h);
-  neighbors::NeighborList ff(cpu), fb(cpu);
-  grid.Query(dx.data(), n, 2 * h, true, ff);
-  fb.offsets.resize(n + 1);
-  fb.offsets.SetZero();
-  const CubicSpline<double> kernel(h);
-  exec::DeviceArray<double> w(cpu, ff.pairs());
-  exec::DeviceArray<Vec3d> grad(cpu, ff.pairs());
-  exec::cpu::ParallelFor(n, kernels::PairValues<double>{dx.data(), dx.data(), ff.offsets.data(), ff.indices.data(), kernel, w.data(), grad.data()});
-  const Pairs<double> FF{ff.offsets.data(), ff.indices.data(), w.data(), grad.data()};
-  const Pairs<double> FB{fb.offsets.data(), nullptr, nullptr, nullptr};
+  const FluidOnlyPairs pairs(dx, h);
+  const CubicSpline<double>& kernel = pairs.kernel;
+  const Pairs<double> FF = pairs.FF(), FB = pairs.FB();
   const double mass = 1000 * dp * dp * dp;
   std::vector<double> rho(n);
   for (auto& r : rho) r = 1000 * (1 + 0.1 * u(rng));
@@ -241,18 +254,9 @@ TEST(Iisph, LatticeDiagonalAndRestFixedPoint) {
   const Index n = Index(x.size());
   const exec::Device cpu = exec::Device::Cpu();
   exec::DeviceArray<Vec3d> dx(cpu, x), v(cpu, n);
-  neighbors::UniformGrid<double> grid(cpu);
-  grid.Build(dx.data(), n, 2 * h);
-  neighbors::NeighborList ff(cpu), fb(cpu);
-  grid.Query(dx.data(), n, 2 * h, true, ff);
-  fb.offsets.resize(n + 1);
-  fb.offsets.SetZero();
-  const CubicSpline<double> kernel(h);
-  exec::DeviceArray<double> w(cpu, ff.pairs());
-  exec::DeviceArray<Vec3d> grad(cpu, ff.pairs());
-  exec::cpu::ParallelFor(n, kernels::PairValues<double>{dx.data(), dx.data(), ff.offsets.data(), ff.indices.data(), kernel, w.data(), grad.data()});
-  const Pairs<double> FF{ff.offsets.data(), ff.indices.data(), w.data(), grad.data()};
-  const Pairs<double> FB{fb.offsets.data(), nullptr, nullptr, nullptr};
+  const FluidOnlyPairs pairs(dx, h);
+  const CubicSpline<double>& kernel = pairs.kernel;
+  const Pairs<double> FF = pairs.FF(), FB = pairs.FB();
   const double mass = 1000 * dp * dp * dp;
   exec::DeviceArray<double> rho(cpu, n), err(cpu, n), p_prev(cpu, n), adv(cpu, n), aii(cpu, n), p(cpu, n), p_next(cpu, n), comp(cpu, n);
   exec::DeviceArray<Vec3d> dii(cpu, n), s(cpu, n);
