@@ -121,6 +121,7 @@ class Simulation {
   std::int64_t step_count_ = 0;
   std::int64_t next_id_ = 0;
   std::int64_t removed_total_ = 0;
+  double diffusion_pending_ = 0;         // film diffusion time not yet applied, s
   std::vector<double> emitter_travel_;  // distance travelled since each emitter's last layer, m
   std::vector<std::string> object_names_;
   Vec3<T> domain_min_{}, domain_max_{};  // particles leaving this box are removed
