@@ -73,7 +73,10 @@ void UniformGrid<T>::BuildImpl(const Vec3<T>* points, Index n, T cell_size, cons
   keys_.resize(n);
   sorted_index_.resize(n);
   exec::ParallelFor(device_, n, kernels::CellKeys<T>{points, view_.origin, view_.inv_cell, keys_.data(), sorted_index_.data()});
-  exec::SortPairs(device_, keys_.data(), sorted_index_.data(), n, 3 * kMortonBits);
+  // Only as many Morton bits as the cloud's extent needs (fewer radix passes).
+  const T span = std::max({hi.x - view_.origin.x, hi.y - view_.origin.y, hi.z - view_.origin.z}) / cell_size + T(2);
+  const int bits_per_axis = std::min(kMortonBits, static_cast<int>(std::bit_width(static_cast<std::uint64_t>(span) + 1)));
+  exec::SortPairs(device_, keys_.data(), sorted_index_.data(), n, 3 * bits_per_axis);
 
   flags_.resize(n);
   cell_of_slot_.resize(n);
