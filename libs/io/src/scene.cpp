@@ -92,6 +92,25 @@ Emitter ParseEmitter(TomlReader& t) {
   return e;
 }
 
+// Presets set the accuracy knobs before the explicit values are read, so explicit values win.
+// Provisional values (the speed/accuracy study of issue 10 will replace them): preview trades
+// accuracy for speed, reference is for comparisons.
+void ApplyQualityPreset(const std::string& quality, Scene& scene) {
+  SolverSettings& s = scene.solver;
+  if (quality == "preview") {
+    s.eta = 0.01;
+    s.cfl = 0.6;
+    s.dt_max = 0.01;
+    s.max_iterations = 50;
+  } else if (quality == "reference") {
+    s.eta = 1e-4;
+    s.cfl = 0.2;
+    s.dt_max = 0.002;
+    s.max_iterations = 500;
+    scene.fluid.precision = "double";
+  }
+}
+
 }  // namespace
 
 const std::vector<std::string>& KnownModules() {
@@ -128,6 +147,7 @@ Scene ParseScene(const std::string& text, const fs::path& file) {
     scene.info.quality = t.String("quality", "", {"preview", "production", "reference"});
     t.RejectUnknownKeys();
   }
+  ApplyQualityPreset(scene.info.quality, scene);
   {
     TomlReader t = top.Table("water");
     FluidSettings& f = scene.fluid;

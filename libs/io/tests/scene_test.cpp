@@ -94,5 +94,18 @@ TEST(Scene, OtherChecks) {
   EXPECT_NE(ErrorOf("[[solid]]\nname = \"a\"\n[[solid]]\nname = \"a\"\n").find("two solids"), std::string::npos);
 }
 
+TEST(Scene, QualityPresetsSetDefaultsAndExplicitValuesWin) {
+  const Scene preview = ParseScene("[scene]\nquality = \"preview\"\n", "q.toml");
+  EXPECT_EQ(preview.solver.eta, 0.01);
+  EXPECT_EQ(preview.solver.cfl, 0.6);
+  const Scene reference = ParseScene("[scene]\nquality = \"reference\"\n[simulation]\neta = 0.0005\n", "q.toml");
+  EXPECT_EQ(reference.solver.eta, 0.0005) << "an explicit value overrides the preset";
+  EXPECT_EQ(reference.solver.cfl, 0.2);
+  EXPECT_EQ(reference.fluid.precision, "double");
+  const Scene plain = ParseScene("", "q.toml");
+  EXPECT_EQ(plain.solver.eta, 0.001);
+  EXPECT_EQ(plain.fluid.precision, "float");
+}
+
 }  // namespace
 }  // namespace rime::io
