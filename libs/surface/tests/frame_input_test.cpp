@@ -1,5 +1,6 @@
 // Reading rime-sim frames for reconstruction: phase selection, stored anisotropy, fallbacks.
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <filesystem>
 
@@ -27,7 +28,7 @@ io::ParticleFrame MakeFrame(bool with_anisotropy) {
 }
 
 TEST(FrameInput, SelectsIceWithStoredAnisotropyFromAFile) {
-  const fs::path dir = fs::temp_directory_path() / "rime_surface_frames";
+  const fs::path dir = fs::temp_directory_path() / ("rime_surface_frames_" + std::to_string(getpid()));
   fs::create_directories(dir);
   const fs::path path = io::FramePath(dir, "particles", 3, "h5part");
   io::WriteParticleFrame(path, MakeFrame(true));

@@ -1,6 +1,7 @@
 // Reconstruction acceptance tests (issue 7; spec §10, T26–T27): radius and closedness of a ball,
 // thin sheets, separated clusters, level-set validity and the VDB file contract.
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <cmath>
 #include <cstdio>
@@ -251,7 +252,7 @@ TEST(Reconstruct, EmptyInputGivesAValidEmptyLevelSet) {
   none.spacing = kSpacing;
   const Result result = Reconstruct(none, Settings{});
   EXPECT_TRUE(result.mesh.empty());
-  const fs::path dir = fs::temp_directory_path() / "rime_surface_empty";
+  const fs::path dir = fs::temp_directory_path() / ("rime_surface_empty_" + std::to_string(getpid()));
   fs::create_directories(dir);
   WriteVdb(dir / "ice.0001.vdb", result);
   const auto info = InspectVdb(dir / "ice.0001.vdb");
@@ -273,7 +274,7 @@ TEST(Reconstruct, VdbFileContract) {
   ASSERT_FALSE(result.mesh.empty());
   ASSERT_EQ(result.mesh.velocities.size(), result.mesh.positions.size());
   EXPECT_NEAR(result.mesh.velocities[0].y, 2.0f, 1e-5f);
-  const fs::path dir = fs::temp_directory_path() / "rime_surface_vdb";
+  const fs::path dir = fs::temp_directory_path() / ("rime_surface_vdb_" + std::to_string(getpid()));
   fs::create_directories(dir);
   const fs::path file = dir / "ice.0007.vdb";
   WriteVdb(file, result);

@@ -1,5 +1,6 @@
 // rime-surface command line: outputs per frame and phase, bad input, nothing half-written.
 #include <gtest/gtest.h>
+#include <unistd.h>
 #include <hdf5.h>
 
 #include <cmath>
@@ -22,7 +23,8 @@ struct RunResult {
 };
 
 RunResult Execute(const std::string& args) {
-  const fs::path log = fs::temp_directory_path() / "rime_surface_cli.log";
+  // One log per process: ctest runs tests in parallel, and CI runs may overlap.
+  const fs::path log = fs::temp_directory_path() / ("rime_surface_cli_" + std::to_string(getpid()) + ".log");
   const int status = std::system((kTool + " " + args + " > " + log.string() + " 2>&1").c_str());
   std::ifstream in(log);
   std::stringstream text;
@@ -61,7 +63,8 @@ rime::io::ParticleFrame MakeFrame(std::int64_t number, bool ice, bool anisotropy
 class Cli : public ::testing::Test {
  protected:
   void SetUp() override {
-    dir_ = fs::temp_directory_path() / ("rime_surface_cli_" + std::string(::testing::UnitTest::GetInstance()->current_test_info()->name()));
+    dir_ = fs::temp_directory_path() / ("rime_surface_cli_" + std::to_string(getpid()) + "_" +
+                                        std::string(::testing::UnitTest::GetInstance()->current_test_info()->name()));
     fs::remove_all(dir_);
     fs::create_directories(dir_ / "sim");
   }
