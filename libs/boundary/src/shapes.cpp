@@ -106,14 +106,6 @@ void RequirePositive(double value, const char* what) {
     throw InputError(fmt::format("{} must be positive and finite, got {}", what, value));
 }
 
-Mat3<double> RotationAbout(int axis, double degrees) {
-  const double a = degrees * kPi / 180, c = std::cos(a), s = std::sin(a);
-  Mat3<double> r = Mat3<double>::Identity();
-  const int u = (axis + 1) % 3, v = (axis + 2) % 3;
-  r.m[u][u] = c, r.m[u][v] = -s, r.m[v][u] = s, r.m[v][v] = c;
-  return r;
-}
-
 }  // namespace
 
 io::TriMesh MakeBox(const Vec3d& size, bool container, double max_edge) {
@@ -212,10 +204,10 @@ double AffineTransform::MaxStretch() const {
 AffineTransform MakeTransform(const io::Transform& t) {
   Mat3<double> scale = Mat3<double>::Identity();
   for (int a = 0; a < 3; ++a) scale.m[a][a] = t.scale[a];
-  const Mat3<double> up = t.up_axis == "y" ? RotationAbout(0, 90) : Mat3<double>::Identity();  // y-up -> z-up
+  // y-up -> z-up: a quarter turn about +x.
+  const Mat3<double> up = t.up_axis == "y" ? RotationXYZDegrees(Vec3d(90, 0, 0)) : Mat3<double>::Identity();
   AffineTransform result;
-  result.linear = RotationAbout(2, t.rotate_deg.z) * RotationAbout(1, t.rotate_deg.y) * RotationAbout(0, t.rotate_deg.x) *
-                  scale * up;
+  result.linear = RotationXYZDegrees(t.rotate_deg) * scale * up;
   result.offset = t.translate;
   return result;
 }

@@ -64,5 +64,20 @@ TEST(SolveSpd, MatchesDirectProduct) {
   EXPECT_NEAR(Determinant(Mat3<double>::Identity()), 1.0, 0);
 }
 
+TEST(Rotation, EulerXYZAndAxisAngle) {
+  const Mat3<double> quarter_x = RotationXYZDegrees(Vec3d(90, 0, 0));
+  EXPECT_NEAR(Norm(quarter_x * Vec3d(0, 1, 0) - Vec3d(0, 0, 1)), 0.0, 1e-15) << "y-up becomes z-up";
+  const Mat3<double> r = RotationXYZDegrees(Vec3d(30, -45, 120));
+  const Mat3<double> expected = AxisAngleRotation(Vec3d(0, 0, 2), 120 * M_PI / 180) * AxisAngleRotation(Vec3d(0, 3, 0), -45 * M_PI / 180) *
+                                AxisAngleRotation(Vec3d(4, 0, 0), 30 * M_PI / 180);
+  const Mat3<double> rtr = Transpose(r) * r;
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) {
+      EXPECT_NEAR(r.m[i][j], expected.m[i][j], 1e-15);
+      EXPECT_NEAR(rtr.m[i][j], i == j ? 1.0 : 0.0, 1e-15);
+    }
+  EXPECT_NEAR(Determinant(r), 1.0, 1e-15);
+}
+
 }  // namespace
 }  // namespace rime

@@ -4,21 +4,6 @@
 
 namespace rime::sph {
 
-Mat3<double> AxisAngleRotation(const Vec3d& axis_in, double angle) {
-  const Vec3d a = axis_in / Norm(axis_in);
-  const double c = std::cos(angle), s = std::sin(angle), t = 1 - c;
-  Mat3<double> r;
-  r.m[0][0] = c + a.x * a.x * t, r.m[0][1] = a.x * a.y * t - a.z * s, r.m[0][2] = a.x * a.z * t + a.y * s;
-  r.m[1][0] = a.y * a.x * t + a.z * s, r.m[1][1] = c + a.y * a.y * t, r.m[1][2] = a.y * a.z * t - a.x * s;
-  r.m[2][0] = a.z * a.x * t - a.y * s, r.m[2][1] = a.z * a.y * t + a.x * s, r.m[2][2] = c + a.z * a.z * t;
-  return r;
-}
-
-Mat3<double> RotationXYZDegrees(const Vec3d& d) {
-  const double k = M_PI / 180;
-  return AxisAngleRotation({0, 0, 1}, d.z * k) * AxisAngleRotation({0, 1, 0}, d.y * k) * AxisAngleRotation({1, 0, 0}, d.x * k);
-}
-
 ObjectMotion::ObjectMotion(const io::SolidObject& solid)
     : spin_axis_(solid.spin_axis), spin_rate_(solid.spin_rate), spin_center_(solid.spin_center), keyframes_(solid.keyframes) {}
 

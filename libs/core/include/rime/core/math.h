@@ -116,6 +116,24 @@ template <class T> RIME_HDI T Determinant(const Mat3<T>& a) {
          a.m[0][2] * (a.m[1][0] * a.m[2][1] - a.m[1][1] * a.m[2][0]);
 }
 
+/// Rotation by `angle` radians about `axis` (any length > 0), by Rodrigues' formula.
+template <class T> RIME_HDI Mat3<T> AxisAngleRotation(const Vec3<T>& axis, T angle) {
+  const Vec3<T> a = axis / Norm(axis);
+  const T c = std::cos(angle), s = std::sin(angle), t = T(1) - c;
+  Mat3<T> r;
+  r.m[0][0] = c + a.x * a.x * t, r.m[0][1] = a.x * a.y * t - a.z * s, r.m[0][2] = a.x * a.z * t + a.y * s;
+  r.m[1][0] = a.y * a.x * t + a.z * s, r.m[1][1] = c + a.y * a.y * t, r.m[1][2] = a.y * a.z * t - a.x * s;
+  r.m[2][0] = a.z * a.x * t - a.y * s, r.m[2][1] = a.z * a.y * t + a.x * s, r.m[2][2] = c + a.z * a.z * t;
+  return r;
+}
+
+/// Euler angles in degrees applied about X first, then Y, then Z (the scene file's `rotate`).
+template <class T> RIME_HDI Mat3<T> RotationXYZDegrees(const Vec3<T>& degrees) {
+  const T k = T(3.14159265358979323846) / T(180);
+  return AxisAngleRotation(Vec3<T>(0, 0, 1), degrees.z * k) * AxisAngleRotation(Vec3<T>(0, 1, 0), degrees.y * k) *
+         AxisAngleRotation(Vec3<T>(1, 0, 0), degrees.x * k);
+}
+
 /// Solves A x = b for a symmetric positive definite 3x3 A by Cholesky (no pivoting needed).
 template <class T> RIME_HDI Vec3<T> SolveSpd(const Mat3<T>& a, const Vec3<T>& b) {
   const T l00 = std::sqrt(a.m[0][0]);

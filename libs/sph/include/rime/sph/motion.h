@@ -10,11 +10,6 @@
 
 namespace rime::sph {
 
-/// Rotation matrix for Euler angles in degrees, applied X first, then Y, then Z.
-Mat3<double> RotationXYZDegrees(const Vec3d& degrees);
-/// Rotation by `angle` radians about the unit axis `axis` (Rodrigues).
-Mat3<double> AxisAngleRotation(const Vec3d& axis, double angle);
-
 class ObjectMotion {
  public:
   ObjectMotion() = default;  // static
