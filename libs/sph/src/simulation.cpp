@@ -78,6 +78,10 @@ struct Simulation<T>::State {
   neighbors::NeighborList bf;
   std::int64_t ice_count = 0;
 
+  /// Keeps the water particles order[0..count) in that order: every persistent per-water attribute
+  /// (the state a checkpoint carries) is listed here and only here.
+  void GatherFluid(const exec::Device& device, Index count);
+
   Index n() const { return static_cast<Index>(x.size()); }
   Index nb() const { return static_cast<Index>(bx.size()); }
   Pairs<T> FF() const { return {ff.offsets.data(), ff.indices.data(), ff_w.data(), ff_grad.data()}; }
@@ -161,6 +165,14 @@ freeze::FreezeParams<T> MakeFreezeParams(const io::Scene& scene) {
 }
 
 }  // namespace
+
+template <class T>
+void Simulation<T>::State::GatherFluid(const exec::Device& device, Index count) {
+  Reorder(device, x, tmp_vec, order.data(), count);
+  Reorder(device, v, tmp_vec, order.data(), count);
+  Reorder(device, pressure_previous, tmp_scalar, order.data(), count);
+  Reorder(device, id, tmp_id, order.data(), count);
+}
 
 template <class T>
 Simulation<T>::Simulation(const io::Scene& scene, const exec::Device& device)
@@ -487,10 +499,7 @@ void Simulation<T>::ConvertToIce(const DeviceArray<std::uint32_t>& frozen_list, 
   // Remove the frozen particles from the fluid.
   const Index kept = n - frozen;
   ListFlagged(device_, s.keep, n, s.slot, s.order);
-  Reorder(device_, s.x, s.tmp_vec, s.order.data(), kept);
-  Reorder(device_, s.v, s.tmp_vec, s.order.data(), kept);
-  Reorder(device_, s.pressure_previous, s.tmp_scalar, s.order.data(), kept);
-  Reorder(device_, s.id, s.tmp_id, s.order.data(), kept);
+  s.GatherFluid(device_, kept);
   // The boundary set changed: re-index it and recompute the volumes of every boundary particle
   // within 2h of new ice, the new ice included (spec §3, §9.7).
   const T support = T(2 * scene_.fluid.smoothing_length());
@@ -565,10 +574,7 @@ void Simulation<T>::NeighborSearch() {
   // Reorder the persistent fluid state along the grid's Z curve for cache locality.
   s.order.resize(n);
   exec::CopyOnDevice(device_, s.order.data(), s.fluid_grid.order(), n * sizeof(std::uint32_t));
-  Reorder(device_, s.x, s.tmp_vec, s.order.data(), n);
-  Reorder(device_, s.v, s.tmp_vec, s.order.data(), n);
-  Reorder(device_, s.pressure_previous, s.tmp_scalar, s.order.data(), n);
-  Reorder(device_, s.id, s.tmp_id, s.order.data(), n);
+  s.GatherFluid(device_, n);
   s.fluid_grid.AdoptOrder(s.x.data());
 
   const CubicSpline<T> kernel(T(scene_.fluid.smoothing_length()));
@@ -702,14 +708,9 @@ void Simulation<T>::RemoveOutsideDomain(StepStats& stats) {
   s.keep.resize(n);
   s.slot.resize(n);
   exec::ParallelFor(device_, n, kernels::InsideDomain<T>{s.x.data(), domain_min_, domain_max_, s.keep.data()});
-  const Index kept = static_cast<Index>(exec::ExclusiveScan(device_, s.keep.data(), s.slot.data(), n));
+  const Index kept = ListFlagged(device_, s.keep, n, s.slot, s.order);
   if (kept == n) return;
-  s.order.resize(kept);
-  exec::ParallelFor(device_, n, kernels::CompactionOrder{s.keep.data(), s.slot.data(), s.order.data()});
-  Reorder(device_, s.x, s.tmp_vec, s.order.data(), kept);
-  Reorder(device_, s.v, s.tmp_vec, s.order.data(), kept);
-  Reorder(device_, s.pressure_previous, s.tmp_scalar, s.order.data(), kept);
-  Reorder(device_, s.id, s.tmp_id, s.order.data(), kept);
+  s.GatherFluid(device_, kept);
   stats.removed_particles = n - kept;
   removed_total_ += n - kept;
 }

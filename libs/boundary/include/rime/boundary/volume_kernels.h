@@ -42,26 +42,14 @@ struct BoundaryVolumeByCell {
   T* volumes;
   RIME_HD void operator()(Index cell) const {
     const std::uint32_t begin = grid.cell_start[cell], end = grid.cell_start[cell + 1];
-    const T size = T(1) / grid.inv_cell;
-    const Vec3<T> first = grid.points[grid.sorted_index[begin]];
-    const Vec3<T> center(grid.origin.x + (T(grid.CellCoord(first.x, grid.origin.x)) + T(0.5)) * size,
-                         grid.origin.y + (T(grid.CellCoord(first.y, grid.origin.y)) + T(0.5)) * size,
-                         grid.origin.z + (T(grid.CellCoord(first.z, grid.origin.z)) + T(0.5)) * size);
-    std::uint32_t range_begin[27], range_end[27];
-    int ranges = 0;
-    // A radius beyond the cell's half diagonal keeps all 27 cells.
-    grid.ForEachCandidateCell(center, T(2) * size, [&](std::uint32_t b, std::uint32_t e) {
-      range_begin[ranges] = b;
-      range_end[ranges] = e;
-      ++ranges;
-    });
+    const neighbors::kernels::CellNeighborhood<T> hood(grid, grid, static_cast<std::uint32_t>(cell));
     const T r2max = kernel.SupportRadius() * kernel.SupportRadius();
     for (std::uint32_t s = begin; s < end; ++s) {
       const std::uint32_t b = grid.sorted_index[s];
       const Vec3<T> x = grid.points[b];
       T density_number = kernel.W0();
-      for (int k = 0; k < ranges; ++k)
-        for (std::uint32_t t = range_begin[k]; t < range_end[k]; ++t) {
+      for (int k = 0; k < hood.count; ++k)
+        for (std::uint32_t t = hood.begin[k]; t < hood.end[k]; ++t) {
           const std::uint32_t j = grid.sorted_index[t];
           const Vec3<T> r = x - grid.points[j];
           const T r2 = Dot(r, r);
