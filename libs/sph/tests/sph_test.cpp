@@ -67,65 +67,84 @@ TEST(Iisph, BlockAtRestStaysAtRest) {
   RecordProperty("max_speed_after_1s", std::to_string(speed));
   std::printf("block at rest: after 1 s max speed %.3g m/s, mean speed %.3g m/s, average density error %.3g%%, %d iterations\n",
               speed, mean, 100 * last.average_density_error, last.pressure_iterations);
-  // IISPH's noise floor: each step may leave η = 0.1 % average compression, i.e. velocities of
-  // order η h/Δt = 0.01 m/s at the surface, and the cubic start lattice rearranges. The issue's
-  // 1e-3 m/s is not reached (see the issue note); this bounds what is.
+  // The issue's 1e-3 m/s is not reached: the cubic start lattice rearranges into a denser packing
+  // in bursts that release potential energy (the mean height drops), and the paper's sticky walls
+  // (β0b = 1) shear the block against them. Neither a tighter η (1e-5) nor a hydrostatic initial
+  // pressure removes it; with β0b = 0.1 the block is at 0.009 m/s after 1 s. This bounds what is.
   EXPECT_LT(speed, 0.05);
   EXPECT_LT(mean, 0.01);
   EXPECT_LT(last.average_density_error, scene.solver.eta);
   EXPECT_EQ(sim->removed_total(), 0);
 }
 
-// Layer-averaged pressure of a 0.5 m column against ρ0 g depth (spec T13 / issue acceptance).
+// Pressure profile of a 0.5 m column against ρ0 g depth (spec T13 / issue acceptance): pressures
+// and heights of each particle averaged over the last 0.3 s of 1.2 s, binned by depth.
 TEST(Iisph, HydrostaticPressureProfile) {
-  const double dp = 0.02;
-  const int layers = 25;  // 0.5 m
-  io::Scene scene = test::ColumnScene(dp, 8, 8, layers, 0.6);
+  const double dp = 0.02, t_end = 1.2, t_average = 0.3;
+  const int width_particles = 16, layers = 25;  // 0.5 m; 16 wide so that most particles are 2.5 d_p from the walls
+  io::Scene scene = test::ColumnScene(dp, width_particles, width_particles, layers, 0.6);
   scene.modules = {"gravity", "viscosity"};  // spec T13 runs with the sticky viscosities
-  auto sim = MakeColumn<double>(scene, 8, 8, layers, 0.6);
-  while (sim->time() < 1.2 - 1e-9) sim->Step(sim->NextTimeStep(1.2));
-  const auto x = sim->Positions();
-  const auto p = sim->Pressures();
+  auto sim = MakeColumn<double>(scene, width_particles, width_particles, layers, 0.6);
+  const std::size_t n = sim->fluid_count();
+  std::vector<double> p(n), z(n);
+  std::vector<Vec3d> x(n);
+  int samples = 0;
+  while (sim->time() < t_end - 1e-9) {
+    sim->Step(sim->NextTimeStep(t_end));
+    if (sim->time() < t_end - t_average) continue;
+    // Keyed by particle id: the solver reorders particles along a space-filling curve.
+    const auto pi = sim->Pressures();
+    const auto xi = sim->Positions();
+    const auto id = sim->Ids();
+    for (std::size_t i = 0; i < n; ++i) p[id[i]] += pi[i], z[id[i]] += xi[i].z, x[id[i]] = xi[i];
+    ++samples;
+  }
+  for (std::size_t i = 0; i < n; ++i) p[i] /= samples, z[i] /= samples;
   // Free surface from the volume: each particle fills dp³ and the Akinci walls act 0.6 dp from
   // their particles (rest density is reached 1.1 dp from a wall, spec §3).
-  std::map<int, std::pair<double, int>> layer;  // layer index -> (sum p, count)
-  const double width = test::BoxWidth(dp, 8);
-  const double surface = 0.6 * dp + double(x.size()) * dp * dp * dp / ((width - 1.2 * dp) * (width - 1.2 * dp));
-  for (std::size_t i = 0; i < x.size(); ++i) {
-    if (x[i].x < 2.5 * dp || x[i].x > width - 2.5 * dp || x[i].y < 2.5 * dp || x[i].y > width - 2.5 * dp) continue;
-    const int l = int(std::floor((x[i].z - 1.1 * dp) / dp + 0.5));
-    layer[l].first += p[i];
-    layer[l].second += 1;
-  }
-  const double rho0 = 1000, g = 9.81;
-  double worst_interior = 0;
-  for (const auto& [l, sum] : layer) {
-    const double z = 1.1 * dp + l * dp;
-    const double ratio = sum.first / sum.second / (rho0 * g * (surface - z));
-    std::printf("layer %2d depth %.3f m: p/(rho0 g depth) = %.3f\n", l, surface - z, ratio);
-    // Interior layers at least 5 spacings deep: the top layers carry no pressure (free-surface
-    // particles are under-dense and clamped to p = 0), which offsets the profile by about one
-    // spacing; the two bottom layers show the known Akinci+IISPH wall overshoot (spec T13).
-    if (l >= 2 && surface - z >= 5 * dp) {
-      worst_interior = std::max(worst_interior, std::fabs(ratio - 1));
-      EXPECT_GT(ratio, 0.8) << "layer " << l;
-      EXPECT_LT(ratio, 1.1) << "layer " << l;
-    }
-  }
-  // Least-squares slope of the layer pressures against height: must be −ρ0 g.
+  const double width = test::BoxWidth(dp, width_particles);
+  const double surface = 0.6 * dp + double(n) * dp * dp * dp / ((width - 1.2 * dp) * (width - 1.2 * dp));
+  const double rho0 = 1000, g = 9.81, floor_layer = 1.1 * dp;
+  auto away_from_side_walls = [&](const Vec3d& q) { return q.x > 2.5 * dp && q.x < width - 2.5 * dp && q.y > 2.5 * dp && q.y < width - 2.5 * dp; };
+  // Interior: at least 5 d_p below the surface and 5 d_p above the floor layer. The top layers carry
+  // almost no pressure (free-surface particles are under-dense and clamped to p = 0) and the bottom
+  // layers show the known Akinci+IISPH wall overshoot (spec T13); both are printed, not asserted.
+  auto interior = [&](double zi) { return surface - zi >= 5 * dp && zi - floor_layer >= 5 * dp; };
+  // Least-squares line p = c0 + c1 z over the interior particles: slope −ρ0 g, and its zero
+  // crossing is the effective free surface.
   double sz = 0, sp = 0, szz = 0, szp = 0;
   int count = 0;
-  for (const auto& [l, sum] : layer) {
-    if (l < 2 || l >= layers - 2) continue;
-    const double z = 1.1 * dp + l * dp, pm = sum.first / sum.second;
-    sz += z, sp += pm, szz += z * z, szp += z * pm, ++count;
-  }
-  const double slope = (count * szp - sz * sp) / (count * szz - sz * sz);
-  std::printf("hydrostatic: worst deep-layer deviation %.2f%%; fitted dp/dz = %.1f Pa/m (rho0 g = %.1f)\n", 100 * worst_interior, slope,
-              -rho0 * g);
+  for (std::size_t i = 0; i < n; ++i)
+    if (away_from_side_walls(x[i]) && interior(z[i])) sz += z[i], sp += p[i], szz += z[i] * z[i], szp += z[i] * p[i], ++count;
+  const double slope = (count * szp - sz * sp) / (count * szz - sz * sz), intercept = (sp - slope * sz) / count;
+  const double effective_surface = -intercept / slope, offset = surface - effective_surface;
+  std::printf("hydrostatic: fitted dp/dz = %.1f Pa/m (rho0 g = %.1f, %+.2f%%); effective free surface %.2f d_p below the volume's\n", slope,
+              -rho0 * g, 100 * (-slope / (rho0 * g) - 1), offset / dp);
   EXPECT_NEAR(-slope / (rho0 * g), 1.0, 0.05);
+  EXPECT_GT(offset, -0.5 * dp);
+  EXPECT_LT(offset, 0.75 * dp);
+  struct Bin { double p = 0, z = 0; int count = 0; };
+  std::map<int, Bin> bins;  // by depth, 2.5 d_p wide: the start lattice rearranges into no crisp layers
+  for (std::size_t i = 0; i < n; ++i) {
+    if (!away_from_side_walls(x[i])) continue;
+    Bin& b = bins[int(std::floor((surface - z[i]) / (2.5 * dp)))];
+    b.p += p[i], b.z += z[i], b.count += 1;
+  }
+  double worst = 0, worst_offset = 0;
+  for (auto& [k, b] : bins) {
+    b.p /= b.count, b.z /= b.count;
+    const double ratio = b.p / (rho0 * g * (surface - b.z)), ratio_offset = b.p / (rho0 * g * (effective_surface - b.z));
+    std::printf("depth %.3f m (%3d particles): p/(rho0 g depth) = %.3f, against the effective surface %.3f%s\n", surface - b.z, b.count, ratio,
+                ratio_offset, interior(b.z) ? "" : "  (top or bottom layers, not asserted)");
+    if (!interior(b.z)) continue;
+    worst = std::max(worst, std::fabs(ratio - 1));
+    worst_offset = std::max(worst_offset, std::fabs(ratio_offset - 1));
+    EXPECT_NEAR(ratio, 1.0, 0.10) << "depth " << surface - b.z;
+    EXPECT_NEAR(ratio_offset, 1.0, 0.05) << "depth " << surface - b.z;
+  }
   const double speed = MaxSpeed(*sim);
-  std::printf("hydrostatic: max speed after 1.2 s %.3g m/s\n", speed);
+  std::printf("hydrostatic: interior bins within %.1f%% of rho0 g depth (%.1f%% against the effective surface); max speed %.3g m/s\n",
+              100 * worst, 100 * worst_offset, speed);
   EXPECT_LT(speed, 0.15);
 }
 
