@@ -1,15 +1,23 @@
 #include "rime/boundary/sampler.h"
 
 #include <fmt/format.h>
-#include <tbb/parallel_sort.h>
+#include <tbb/parallel_for.h>
+
+#ifdef __linux__
+#include <sys/mman.h>
+#endif
 
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <bit>
 #include <chrono>
 #include <cmath>
+#include <cstdlib>
 #include <limits>
+#include <memory>
 #include <numeric>
+#include <type_traits>
 
 #include "rime/core/error.h"
 #include "rime/core/log.h"
@@ -86,43 +94,254 @@ Vec3f UnitOr(const Vec3d& v, const Vec3d& fallback) {
   return f > 0 ? Vec3f(fallback / f) : Vec3f(0, 0, 1);
 }
 
-struct Edge {
-  std::uint32_t a, b;
-  Vec3d normal_sum;      // sum of the adjacent faces' area vectors
-  Vec3d first_normal;    // fallback when they cancel (a sheet folded onto itself)
+// Storage for arrays whose elements are all written before they are read: no value-initialisation
+// (a vector's zero fill runs on one thread and takes every page fault there); large ones ask for
+// transparent huge pages, which cuts the page faults of first touch 512-fold where the kernel
+// grants them. Sampling a large mesh touches several hundred MB of such arrays.
+template <class T>
+class Scratch {
+  static_assert(std::is_trivially_copyable_v<T> && std::is_trivially_destructible_v<T>);
+
+ public:
+  explicit Scratch(std::size_t n) : n_(n) {
+    constexpr std::size_t kHuge = std::size_t(2) << 20;
+    const std::size_t bytes = std::max<std::size_t>(n * sizeof(T), 1);
+    if (bytes >= 2 * kHuge) {
+      const std::size_t rounded = (bytes + kHuge - 1) / kHuge * kHuge;
+      data_.reset(static_cast<T*>(std::aligned_alloc(kHuge, rounded)));
+#ifdef __linux__
+      if (data_) madvise(data_.get(), rounded, MADV_HUGEPAGE);  // a hint; failure is harmless
+#endif
+    } else {
+      data_.reset(static_cast<T*>(std::malloc(bytes)));
+    }
+    if (!data_) throw std::bad_alloc();
+  }
+  T& operator[](std::size_t i) { return data_.get()[i]; }
+  const T& operator[](std::size_t i) const { return data_.get()[i]; }
+  T* data() { return data_.get(); }
+  const T* data() const { return data_.get(); }
+  std::size_t size() const { return n_; }
+
+ private:
+  struct Free {
+    void operator()(T* p) const { std::free(p); }
+  };
+  std::unique_ptr<T, Free> data_;
+  std::size_t n_;
 };
+
+// Smallest i < n with bad(i), or n: parallel, and the same answer for any thread count (so the
+// error message names the first bad element).
+template <class Bad>
+std::size_t FirstBad(std::size_t n, Bad&& bad) {
+  std::atomic<std::size_t> first{n};
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 4096), [&](const tbb::blocked_range<std::size_t>& r) {
+    for (std::size_t i = r.begin(); i != r.end() && i < first.load(std::memory_order_relaxed); ++i)
+      if (bad(i)) {
+        std::size_t cur = first.load();
+        while (i < cur && !first.compare_exchange_weak(cur, i)) {}
+        return;
+      }
+  });
+  return first.load();
+}
+
+// Sum of term(i) over i < n in fixed blocks added in block order: parallel and bit-identical for
+// any thread count.
+template <class Term>
+double DeterministicSum(std::size_t n, Term&& term) {
+  constexpr std::size_t kBlock = 1 << 14;
+  std::vector<double> partial((n + kBlock - 1) / kBlock, 0.0);
+  tbb::parallel_for(std::size_t(0), partial.size(), [&](std::size_t b) {
+    double sum = 0;
+    for (std::size_t i = b * kBlock, end = std::min(n, (b + 1) * kBlock); i < end; ++i) sum += term(i);
+    partial[b] = sum;
+  });
+  return std::accumulate(partial.begin(), partial.end(), 0.0);
+}
+
+// In-place exclusive prefix sum (parallel, deterministic); returns the total, which the caller
+// checks against 2^32 before using the (32-bit) offsets.
+std::uint64_t Scan(Scratch<std::uint32_t>& values) {
+  return exec::ExclusiveScan(exec::Device::Cpu(), values.data(), values.data(), Index(values.size()));
+}
 
 void CheckInput(const io::TriMesh& mesh, const SampleOptions& options) {
   if (!(options.spacing > 0) || !std::isfinite(options.spacing))
     throw InputError(fmt::format("boundary spacing must be positive and finite, got {}", options.spacing), options.source);
   if (mesh.triangles.empty()) throw InputError("the mesh has no triangles", options.source);
-  for (std::size_t v = 0; v < mesh.positions.size(); ++v)
-    if (!IsFinite(mesh.positions[v]))
-      throw InputError(fmt::format("vertex {} has a NaN or infinite coordinate", v), options.source);
   const std::size_t nv = mesh.positions.size();
-  for (std::size_t t = 0; t < mesh.triangles.size(); ++t)
-    for (std::uint32_t v : mesh.triangles[t])
-      if (v >= nv) throw InputError(fmt::format("triangle {} uses vertex {} of {}", t, v, nv), options.source);
+  const std::size_t v = FirstBad(nv, [&](std::size_t i) { return !IsFinite(mesh.positions[i]); });
+  if (v < nv) throw InputError(fmt::format("vertex {} has a NaN or infinite coordinate", v), options.source);
+  const std::size_t nt = mesh.triangles.size();
+  const auto out_of_range = [&](std::size_t t) {
+    const auto& tri = mesh.triangles[t];
+    return tri[0] >= nv || tri[1] >= nv || tri[2] >= nv;
+  };
+  const std::size_t t = FirstBad(nt, out_of_range);
+  if (t < nt) {
+    const auto& tri = mesh.triangles[t];
+    const std::uint32_t bad = tri[0] >= nv ? tri[0] : (tri[1] >= nv ? tri[1] : tri[2]);
+    throw InputError(fmt::format("triangle {} uses vertex {} of {}", t, bad, nv), options.source);
+  }
 }
 
 void CheckCount(double count, const SampleOptions& options) {
-  if (count > double(options.max_particles))
+  if (count > double(options.max_particles) || count > double(0xffffffffu))
     throw InputError(fmt::format("spacing {:g} m would make about {:.3g} boundary particles, more than the maximum {} "
                                  "(use a larger spacing or raise --max-particles)",
-                                 options.spacing, count, options.max_particles),
+                                 options.spacing, count, std::min<std::uint64_t>(options.max_particles, 0xffffffffu)),
                      options.source);
 }
+
+// Vertices with identical positions share one representative, the smallest original index among
+// them, found with a lock-free hash table (an atomic minimum per slot, so the result does not
+// depend on which thread inserts first). Writes rep[v] for every vertex.
+void WeldRepresentatives(const std::vector<Vec3f>& positions, Scratch<std::uint32_t>& rep) {
+  const std::size_t nv = positions.size();
+  constexpr std::uint32_t kEmpty = ~0u;
+  const auto bits = [&](std::uint32_t v) {  // -0 folded into +0 so that equal floats have equal bits
+    const Vec3f& p = positions[v];
+    return std::array<std::uint32_t, 3>{std::bit_cast<std::uint32_t>(p.x + 0.0f), std::bit_cast<std::uint32_t>(p.y + 0.0f),
+                                         std::bit_cast<std::uint32_t>(p.z + 0.0f)};
+  };
+  const std::uint32_t size = std::bit_ceil(static_cast<std::uint32_t>(2 * nv + 16)), mask = size - 1;
+  Scratch<std::uint32_t> table(size);
+  exec::cpu::ParallelFor(Index(size), [&](Index i) { table[i] = kEmpty; });
+  exec::cpu::ParallelFor(Index(nv), [&](Index i) {
+    const std::uint32_t v = static_cast<std::uint32_t>(i);
+    const auto key = bits(v);
+    std::uint64_t h = (std::uint64_t(key[0]) | std::uint64_t(key[1]) << 32) * 0x9e3779b97f4a7c15ULL ^ std::uint64_t(key[2]) * 0xc2b2ae3d27d4eb4fULL;
+    h ^= h >> 31;
+    h *= 0xff51afd7ed558ccdULL;
+    for (std::uint32_t slot = static_cast<std::uint32_t>(h >> 32) & mask;; slot = (slot + 1) & mask) {
+      std::atomic_ref<std::uint32_t> entry(table[slot]);
+      std::uint32_t cur = entry.load(std::memory_order_relaxed);
+      if (cur == kEmpty && entry.compare_exchange_strong(cur, v, std::memory_order_relaxed)) {
+        rep[v] = slot;
+        return;
+      }
+      if (bits(cur) != key) continue;  // cur is the slot's occupant either way
+      while (v < cur && !entry.compare_exchange_weak(cur, v, std::memory_order_relaxed)) {}
+      rep[v] = slot;
+      return;
+    }
+  });
+  exec::cpu::ParallelFor(Index(nv), [&](Index v) { rep[v] = table[rep[v]]; });  // slot -> its final minimum
+}
+
+// The (up to 27) cells around one cell of a grid over the sorted particles, with each cell's lower
+// corner so that a particle can skip the cells farther from it than the radius.
+struct CellHood {
+  std::uint32_t begin[27], end[27];
+  Vec3f lo[27];
+  int count = 0;
+  CellHood(const neighbors::GridView<float>& grid, const Vec3f* sorted, float size, std::uint32_t cell) {
+    const neighbors::kernels::CellNeighborhood<float> hood(grid, grid, cell);
+    count = hood.count;
+    for (int k = 0; k < count; ++k) {
+      begin[k] = hood.begin[k], end[k] = hood.end[k];
+      const Vec3f p = sorted[begin[k]];
+      lo[k] = Vec3f(grid.origin.x + float(grid.CellCoord(p.x, grid.origin.x)) * size,
+                    grid.origin.y + float(grid.CellCoord(p.y, grid.origin.y)) * size,
+                    grid.origin.z + float(grid.CellCoord(p.z, grid.origin.z)) * size);
+    }
+  }
+  // Whether a sorted slot t != self with wanted(t) lies closer than sqrt(r2) to p.
+  template <class Wanted>
+  bool AnyWithin(const Vec3f* sorted, float size, const Vec3f& p, std::uint32_t self, float r2, Wanted&& wanted) const {
+    const float slack = 1e-4f * size;  // cell boxes from floor(): never skip a cell by round-off
+    for (int k = 0; k < count; ++k) {
+      const float gx = std::max(std::max(lo[k].x - p.x, p.x - lo[k].x - size) - slack, 0.0f);
+      const float gy = std::max(std::max(lo[k].y - p.y, p.y - lo[k].y - size) - slack, 0.0f);
+      const float gz = std::max(std::max(lo[k].z - p.z, p.z - lo[k].z - size) - slack, 0.0f);
+      if (gx * gx + gy * gy + gz * gz >= r2) continue;
+      for (std::uint32_t t = begin[k]; t < end[k]; ++t)
+        if (t != self && SquaredNorm(sorted[t] - p) < r2 && wanted(t)) return true;
+    }
+    return false;
+  }
+};
+
+// Removes every particle closer than `radius` to a kept one and writes the kept particles, in the
+// Z-curve order of a grid of `cell_size` (>= radius), to out_*. The rule, deterministic and
+// parallel: particles without any other within the radius are kept; the others are decided class
+// by class (vertices [0, edge_base), edges, then faces), and within a class in 8 rounds, one per
+// cell parity (x, y, z mod 2). A round processes its cells in parallel (two cells of the same
+// parity are at least one cell apart, so they never interact), each cell's particles in sorted
+// order, keeping a particle when no kept one is within the radius. Same output for any number
+// of threads.
+void ThinAndOrder(const Vec3f* positions, const Vec3f* normals, std::size_t total, std::size_t edge_base, std::size_t face_base,
+                  float cell_size, float radius, std::vector<Vec3f>& out_positions, std::vector<Vec3f>& out_normals) {
+  neighbors::UniformGrid<float> grid(exec::Device::Cpu());
+  grid.Build(positions, Index(total), cell_size);
+  const neighbors::GridView<float> view = grid.view();
+  const std::uint32_t* order = grid.order();
+  const std::size_t cells = grid.cell_count();
+  Scratch<Vec3f> sorted(total);
+  Scratch<std::uint8_t> kind(total), keep(total), undecided(total), cell_parity(cells);
+  exec::cpu::ParallelFor(Index(total), [&](Index s) {
+    const std::uint32_t i = order[s];
+    sorted[s] = positions[i];
+    kind[s] = i < edge_base ? 0 : (i < face_base ? 1 : 2);
+  });
+  const float r2 = radius * radius;
+  // keep = 1 for particles alone within the radius, 0 (undecided) for the others.
+  exec::cpu::ParallelFor(Index(cells), [&](Index cell) {
+    const CellHood hood(view, sorted.data(), cell_size, std::uint32_t(cell));
+    bool crowded = false;
+    for (std::uint32_t s = view.cell_start[cell]; s < view.cell_start[cell + 1]; ++s) {
+      undecided[s] = hood.AnyWithin(sorted.data(), cell_size, sorted[s], s, r2, [](std::uint32_t) { return true; });
+      keep[s] = !undecided[s];
+      crowded = crowded || undecided[s];
+    }
+    const Vec3f p = sorted[view.cell_start[cell]];
+    cell_parity[cell] = !crowded ? 8
+                                 : std::uint8_t((view.CellCoord(p.x, view.origin.x) & 1) | (view.CellCoord(p.y, view.origin.y) & 1) << 1 |
+                                                (view.CellCoord(p.z, view.origin.z) & 1) << 2);
+  });
+  std::vector<std::uint32_t> rounds[8];  // crowded cells by parity, in cell order
+  for (std::uint32_t cell = 0; cell < cells; ++cell)
+    if (cell_parity[cell] < 8) rounds[cell_parity[cell]].push_back(cell);
+  const auto kept = [&](std::uint32_t t) { return keep[t] != 0; };
+  for (std::uint8_t cls = 0; cls < 3; ++cls)
+    for (const std::vector<std::uint32_t>& round : rounds)
+      exec::cpu::ParallelFor(Index(round.size()), [&](Index r) {
+        const std::uint32_t cell = round[r];
+        const CellHood hood(view, sorted.data(), cell_size, cell);
+        for (std::uint32_t s = view.cell_start[cell]; s < view.cell_start[cell + 1]; ++s)
+          if (undecided[s] && kind[s] == cls) keep[s] = !hood.AnyWithin(sorted.data(), cell_size, sorted[s], s, r2, kept);
+      });
+  Scratch<std::uint32_t> slot(total);
+  exec::cpu::ParallelFor(Index(total), [&](Index s) { slot[s] = keep[s]; });
+  const std::size_t count = Scan(slot);
+  out_positions.resize(count);
+  out_normals.resize(count);
+  exec::cpu::ParallelFor(Index(total), [&](Index s) {
+    if (!keep[s]) return;
+    out_positions[slot[s]] = sorted[s];
+    out_normals[slot[s]] = normals[order[s]];
+  });
+}
+
+// Distinct edges (a, b) with b > a around welded vertex a, with the sum of their faces' area
+// vectors (and the first one, for when the sum cancels: a sheet folded onto itself).
+struct LocalEdge {
+  std::uint32_t b;
+  Vec3d normal_sum, first_normal;
+};
 
 }  // namespace
 
 double EstimateSampleCount(const io::TriMesh& mesh, double spacing) {
-  double area = 0, edge_length = 0;
-  for (const auto& t : mesh.triangles) {
+  const double sum = DeterministicSum(mesh.triangles.size(), [&](std::size_t i) {
+    const auto& t = mesh.triangles[i];
     const Vec3d a(mesh.positions[t[0]]), b(mesh.positions[t[1]]), c(mesh.positions[t[2]]);
-    area += 0.5 * Norm(Cross(b - a, c - a));
-    edge_length += 0.5 * (Norm(b - a) + Norm(c - b) + Norm(a - c));  // each edge is shared by about two faces
-  }
-  return area / (spacing * spacing) + edge_length / spacing + double(mesh.positions.size());
+    // Area over d^2 plus half the perimeter over d (each edge is shared by about two faces).
+    return 0.5 * Norm(Cross(b - a, c - a)) / (spacing * spacing) + 0.5 * (Norm(b - a) + Norm(c - b) + Norm(a - c)) / spacing;
+  });
+  return sum + double(mesh.positions.size());
 }
 
 SurfaceSamples SampleSurface(const io::TriMesh& mesh, const SampleOptions& options) {
@@ -139,80 +358,77 @@ SurfaceSamples SampleSurface(const io::TriMesh& mesh, const SampleOptions& optio
   SampleStats& stats = out.stats;
   stats.triangles = mesh.triangles.size();
 
-  // 1. Weld vertices with identical positions, so shared edges are found by index.
+  // 1. Weld vertices with identical positions, so shared edges are found by index. Welded
+  // vertices are numbered in the order of their first occurrence in the input.
   const std::size_t nv = mesh.positions.size();
-  std::vector<std::uint32_t> order(nv);
-  std::iota(order.begin(), order.end(), 0u);
-  const auto less = [&](std::uint32_t i, std::uint32_t j) {
-    const Vec3f &a = mesh.positions[i], &b = mesh.positions[j];
-    if (a.x != b.x) return a.x < b.x;
-    if (a.y != b.y) return a.y < b.y;
-    if (a.z != b.z) return a.z < b.z;
-    return i < j;
-  };
-  tbb::parallel_sort(order.begin(), order.end(), less);
-  std::vector<std::uint32_t> weld(nv);
-  std::vector<Vec3d> welded_positions;
-  for (std::size_t k = 0; k < nv; ++k) {
-    if (k == 0 || !(mesh.positions[order[k]] == mesh.positions[order[k - 1]]))
-      welded_positions.push_back(Vec3d(mesh.positions[order[k]]));
-    weld[order[k]] = static_cast<std::uint32_t>(welded_positions.size() - 1);
-  }
-  const std::size_t nw = welded_positions.size();
+  Scratch<std::uint32_t> weld(nv), welded_index(nv);
+  WeldRepresentatives(mesh.positions, weld);
+  exec::cpu::ParallelFor(Index(nv), [&](Index v) { welded_index[v] = weld[v] == std::uint32_t(v); });
+  const std::size_t nw = Scan(welded_index);
+  Scratch<Vec3f> welded_positions(nw);  // the input's floats: converted to double where used
+  exec::cpu::ParallelFor(Index(nv), [&](Index v) {
+    if (weld[v] == std::uint32_t(v)) welded_positions[welded_index[v]] = mesh.positions[v];
+  });
+  exec::cpu::ParallelFor(Index(nv), [&](Index v) { weld[v] = welded_index[weld[v]]; });  // touches element v only
+  const auto wp = [&](std::uint32_t v) { return Vec3d(welded_positions[v]); };
   phase("check + weld");
 
-  // 2. Valid triangles, their area vectors, and area-weighted vertex normals.
+  // 2. Valid triangles and their area vectors.
   const std::size_t nt = mesh.triangles.size();
-  std::vector<std::array<std::uint32_t, 3>> tris(nt);
-  std::vector<Vec3d> area_vectors(nt);
-  std::vector<std::uint8_t> valid(nt);
+  Scratch<std::array<std::uint32_t, 3>> tris(nt);
+  Scratch<Vec3d> area_vectors(nt);
+  Scratch<std::uint8_t> valid(nt);
   exec::cpu::ParallelFor(Index(nt), [&](Index t) {
     const auto& src = mesh.triangles[t];
-    tris[t] = {weld[src[0]], weld[src[1]], weld[src[2]]};
-    const Vec3d &a = welded_positions[tris[t][0]], &b = welded_positions[tris[t][1]], &c = welded_positions[tris[t][2]];
+    const std::array<std::uint32_t, 3> w{weld[src[0]], weld[src[1]], weld[src[2]]};
+    tris[t] = w;
+    const Vec3d a = wp(w[0]), b = wp(w[1]), c = wp(w[2]);
     area_vectors[t] = Cross(b - a, c - a);
     const double longest = std::max({SquaredNorm(b - a), SquaredNorm(c - b), SquaredNorm(a - c)});
-    const bool repeated = tris[t][0] == tris[t][1] || tris[t][1] == tris[t][2] || tris[t][0] == tris[t][2];
+    const bool repeated = w[0] == w[1] || w[1] == w[2] || w[0] == w[2];
     valid[t] = !repeated && Norm(area_vectors[t]) > 1e-10 * longest;  // zero area up to round-off
   });
-  std::size_t valid_count = 0;
-  for (std::size_t t = 0; t < nt; ++t) valid_count += valid[t];
+  const std::size_t valid_count = std::size_t(DeterministicSum(nt, [&](std::size_t t) { return double(valid[t]); }));
   stats.degenerate_skipped = nt - valid_count;
   if (valid_count == 0)
     throw InputError(fmt::format("all {} triangles are degenerate (zero area)", nt), options.source);
 
-  // Valid triangles around every welded vertex (CSR), so that vertex normals and edges are found
-  // per vertex in parallel without sorting.
-  std::vector<std::uint32_t> incident_offset(nw + 1, 0);
-  for (std::size_t t = 0; t < nt; ++t)
+  // Valid triangles around every welded vertex (CSR): counted and placed with atomics, then each
+  // vertex's short list sorted, so the lists (and every sum over them) do not depend on threads.
+  Scratch<std::uint32_t> incident_offset(nw + 1), cursor(nw);
+  exec::cpu::ParallelFor(Index(nw + 1), [&](Index v) { incident_offset[v] = 0; });
+  exec::cpu::ParallelFor(Index(nt), [&](Index t) {
     if (valid[t])
-      for (std::uint32_t v : tris[t]) ++incident_offset[v + 1];
-  for (std::size_t v = 0; v < nw; ++v) incident_offset[v + 1] += incident_offset[v];
-  std::vector<std::uint32_t> incident(incident_offset[nw]), cursor(incident_offset.begin(), incident_offset.end() - 1);
-  for (std::size_t t = 0; t < nt; ++t)
+      for (std::uint32_t v : tris[t]) std::atomic_ref<std::uint32_t>(incident_offset[v]).fetch_add(1, std::memory_order_relaxed);
+  });
+  Scratch<std::uint32_t> incident(Scan(incident_offset));
+  exec::cpu::ParallelFor(Index(nw), [&](Index v) { cursor[v] = incident_offset[v]; });
+  exec::cpu::ParallelFor(Index(nt), [&](Index t) {
     if (valid[t])
-      for (std::uint32_t v : tris[t]) incident[cursor[v]++] = static_cast<std::uint32_t>(t);
-  std::vector<std::uint32_t>().swap(cursor);
+      for (std::uint32_t v : tris[t])
+        incident[std::atomic_ref<std::uint32_t>(cursor[v]).fetch_add(1, std::memory_order_relaxed)] = std::uint32_t(t);
+  });
+  exec::cpu::ParallelFor(Index(nw), [&](Index v) { std::sort(incident.data() + incident_offset[v], incident.data() + incident_offset[v + 1]); });
   phase("triangles + incidence");
 
-  // 3. Vertex normals (area-weighted) and distinct edges (a, b > a) with their faces' area vectors,
-  // in two passes over the vertices: count, then fill at scanned offsets.
-  std::vector<Vec3f> vertex_normals(nw);
-  std::vector<std::uint64_t> vertex_edge_offset(nw + 1, 0);
-  const auto edges_of = [&](std::uint32_t a, std::vector<Edge>& local) {
+  // 3. Per welded vertex: area-weighted normal, and the distinct edges (a, b > a) it owns, with
+  // their samples counted here and written in step 4 from the same list (no edge array).
+  const auto edges_of = [&](std::uint32_t a, std::vector<LocalEdge>& local) {
     local.clear();
     for (std::uint32_t k = incident_offset[a]; k < incident_offset[a + 1]; ++k) {
       const std::uint32_t t = incident[k];
       for (std::uint32_t b : tris[t]) {
         if (b <= a) continue;
-        Edge* found = nullptr;
-        for (Edge& e : local)
+        LocalEdge* found = nullptr;
+        for (LocalEdge& e : local)
           if (e.b == b) found = &e;
         if (found) found->normal_sum += area_vectors[t];
-        else local.push_back({a, b, area_vectors[t], area_vectors[t]});
+        else local.push_back({b, area_vectors[t], area_vectors[t]});
       }
     }
   };
+  Scratch<Vec3f> vertex_normals(nw);
+  Scratch<std::uint32_t> edge_count(nw + 1), edge_offset(nw + 1), used_slot(nw + 1);
   exec::cpu::ParallelFor(Index(nw), [&](Index a) {
     Vec3d sum(0, 0, 0), fallback(0, 0, 0);
     for (std::uint32_t k = incident_offset[a]; k < incident_offset[a + 1]; ++k) {
@@ -220,58 +436,50 @@ SurfaceSamples SampleSurface(const io::TriMesh& mesh, const SampleOptions& optio
       fallback = area_vectors[incident[k]];
     }
     vertex_normals[a] = UnitOr(sum, fallback);
-    thread_local std::vector<Edge> local;
+    used_slot[a] = incident_offset[a + 1] > incident_offset[a];
+    thread_local std::vector<LocalEdge> local;
     edges_of(std::uint32_t(a), local);
-    vertex_edge_offset[a] = local.size();
+    edge_count[a] = std::uint32_t(local.size());
+    std::int64_t samples = 0;
+    for (const LocalEdge& e : local) samples += EdgeSegments(Norm(wp(e.b) - wp(std::uint32_t(a))), d) - 1;
+    edge_offset[a] = std::uint32_t(std::min<std::int64_t>(samples, 0xffffffff));
   });
-  std::exclusive_scan(vertex_edge_offset.begin(), vertex_edge_offset.end(), vertex_edge_offset.begin(), std::uint64_t(0));
-  std::vector<Edge> edges(vertex_edge_offset[nw]);
-  exec::cpu::ParallelFor(Index(nw), [&](Index a) {
-    thread_local std::vector<Edge> local;
-    edges_of(std::uint32_t(a), local);
-    std::copy(local.begin(), local.end(), edges.begin() + std::ptrdiff_t(vertex_edge_offset[a]));
-  });
-  stats.edges = edges.size();
-
-  phase("edges");
-  // 4. Count, check the total, then fill in parallel at scanned offsets.
-  std::vector<std::uint32_t> used_vertices;
-  for (std::size_t v = 0; v < nw; ++v)
-    if (incident_offset[v + 1] > incident_offset[v]) used_vertices.push_back(std::uint32_t(v));
-  stats.welded_vertices = used_vertices.size();
-  std::vector<std::uint64_t> edge_offset(edges.size() + 1, 0), face_offset(nt + 1, 0);
-  exec::cpu::ParallelFor(Index(edges.size()), [&](Index e) {
-    edge_offset[e] = EdgeSegments(Norm(welded_positions[edges[e].b] - welded_positions[edges[e].a]), d) - 1;
-  });
-  const auto triangle = [&](std::size_t t) {
-    return Triangle{{welded_positions[tris[t][0]], welded_positions[tris[t][1]], welded_positions[tris[t][2]]}};
-  };
+  edge_count[nw] = edge_offset[nw] = used_slot[nw] = 0;
+  stats.edges = Scan(edge_count);
+  stats.welded_vertices = stats.vertex_samples = Scan(used_slot);
+  stats.edge_samples = Scan(edge_offset);
+  Scratch<std::uint32_t> face_offset(nt + 1);
+  const auto triangle = [&](std::size_t t) { return Triangle{{wp(tris[t][0]), wp(tris[t][1]), wp(tris[t][2])}}; };
   exec::cpu::ParallelFor(Index(nt), [&](Index t) {
-    face_offset[t] = valid[t] ? SampleFaceInterior(triangle(t), d, [](const Vec3d&) {}) : 0;
+    face_offset[t] = valid[t] ? std::uint32_t(SampleFaceInterior(triangle(t), d, [](const Vec3d&) {})) : 0;
   });
-  std::exclusive_scan(edge_offset.begin(), edge_offset.end(), edge_offset.begin(), std::uint64_t(0));
-  std::exclusive_scan(face_offset.begin(), face_offset.end(), face_offset.begin(), std::uint64_t(0));
-  stats.vertex_samples = used_vertices.size();
-  stats.edge_samples = edge_offset.back();
-  stats.face_samples = face_offset.back();
-  const std::size_t total = stats.vertex_samples + stats.edge_samples + stats.face_samples;
+  face_offset[nt] = 0;
+  stats.face_samples = Scan(face_offset);
+  const std::uint64_t total = std::uint64_t(stats.vertex_samples) + stats.edge_samples + stats.face_samples;
   CheckCount(double(total), options);
+  phase("edges + count");
 
-  std::vector<Vec3f> positions(total), normals(total);
+  // 4. Fill at the scanned offsets: vertices, then edges (by owning vertex), then faces.
+  Scratch<Vec3f> positions(total), normals(total);
   const std::size_t edge_base = stats.vertex_samples, face_base = edge_base + stats.edge_samples;
-  exec::cpu::ParallelFor(Index(used_vertices.size()), [&](Index i) {
-    const std::uint32_t v = used_vertices[i];
-    positions[i] = Vec3f(welded_positions[v]);
-    normals[i] = vertex_normals[v];
-  });
-  exec::cpu::ParallelFor(Index(edges.size()), [&](Index e) {
-    const Edge& edge = edges[e];
-    const Vec3d a = welded_positions[edge.a], b = welded_positions[edge.b];
-    const std::uint64_t first = edge_offset[e], count = edge_offset[e + 1] - first;
-    const Vec3f normal = UnitOr(edge.normal_sum, edge.first_normal);
-    for (std::uint64_t k = 0; k < count; ++k) {
-      positions[edge_base + first + k] = Vec3f(a + (b - a) * (double(k + 1) / double(count + 1)));
-      normals[edge_base + first + k] = normal;
+  exec::cpu::ParallelFor(Index(nw), [&](Index a) {
+    if (used_slot[a + 1] > used_slot[a]) {
+      positions[used_slot[a]] = welded_positions[a];
+      normals[used_slot[a]] = vertex_normals[a];
+    }
+    if (edge_offset[a + 1] == edge_offset[a]) return;
+    thread_local std::vector<LocalEdge> local;
+    edges_of(std::uint32_t(a), local);
+    std::size_t slot = edge_base + edge_offset[a];
+    const Vec3d pa = wp(std::uint32_t(a));
+    for (const LocalEdge& e : local) {
+      const Vec3d pb = wp(e.b);
+      const std::int64_t count = EdgeSegments(Norm(pb - pa), d) - 1;
+      const Vec3f normal = UnitOr(e.normal_sum, e.first_normal);
+      for (std::int64_t k = 0; k < count; ++k, ++slot) {
+        positions[slot] = Vec3f(pa + (pb - pa) * (double(k + 1) / double(count + 1)));
+        normals[slot] = normal;
+      }
     }
   });
   exec::cpu::ParallelFor(Index(nt), [&](Index t) {
@@ -284,71 +492,20 @@ SurfaceSamples SampleSurface(const io::TriMesh& mesh, const SampleOptions& optio
       ++slot;
     });
   });
+  phase("fill");
 
-  phase("count + fill");
-  // 5. Remove particles closer than 0.5 d_b to an earlier kept one (greedy in index order:
-  // vertices first, then edges, then faces), which is what the sequential loop below computes.
+  // 5. Thinning: remove particles closer than 0.5 d_b to a kept one, vertices first, then edges,
+  // then faces, and keep the rest in the Z-curve order of a 4 d_b grid (neighbours close in
+  // memory speed up every later neighbour search over the file: volumes, the simulation).
   if (options.remove_near_duplicates && total > 1) {
-    // Only particles with an earlier particle within the radius can be removed; find them in
-    // parallel, one grid cell at a time (its neighbour cells are looked up once for all of its
-    // particles), then run the greedy rule over those alone.
-    const float radius = float(kDuplicateRadius * d), radius2 = radius * radius;
-    neighbors::UniformGrid<float> grid(exec::Device::Cpu());
-    grid.Build(positions.data(), Index(total), float(2 * d));  // a few particles per cell on a surface
-    const neighbors::GridView<float> view = grid.view();
-    std::vector<std::uint8_t> has_earlier(total, 0), keep(total, 1);
-    exec::cpu::ParallelFor(Index(grid.cell_count()), [&](Index cell) {
-      const std::uint32_t begin = view.cell_start[cell], end = view.cell_start[cell + 1];
-      const Vec3f first = positions[view.sorted_index[begin]];
-      const float size = float(2 * d);
-      const Vec3f center(view.origin.x + (float(view.CellCoord(first.x, view.origin.x)) + 0.5f) * size,
-                         view.origin.y + (float(view.CellCoord(first.y, view.origin.y)) + 0.5f) * size,
-                         view.origin.z + (float(view.CellCoord(first.z, view.origin.z)) + 0.5f) * size);
-      std::uint32_t range_begin[27], range_end[27];
-      int ranges = 0;
-      view.ForEachCandidateCell(center, 2 * size, [&](std::uint32_t b, std::uint32_t e) {
-        range_begin[ranges] = b, range_end[ranges] = e, ++ranges;
-      });
-      for (std::uint32_t s = begin; s < end; ++s) {
-        const std::uint32_t i = view.sorted_index[s];
-        bool earlier = false;
-        for (int k = 0; k < ranges && !earlier; ++k)
-          for (std::uint32_t t = range_begin[k]; t < range_end[k]; ++t) {
-            const std::uint32_t j = view.sorted_index[t];
-            if (j < i && SquaredNorm(positions[i] - positions[j]) < radius2) {
-              earlier = true;
-              break;
-            }
-          }
-        has_earlier[i] = earlier;
-      }
-    });
-    std::size_t removed = 0;
-    for (std::size_t i = 0; i < total; ++i) {
-      if (!has_earlier[i]) continue;
-      bool blocked = false;
-      view.ForEachNeighbor(positions[i], radius, [&](std::uint32_t j, const Vec3f&, float) { blocked = blocked || (j < i && keep[j]); });
-      if (blocked) keep[i] = 0, ++removed;
-    }
-    // Kept particles in the grid's Z-curve order: neighbours end up close in memory, which
-    // speeds up every later neighbour search over the file (volumes, the simulation).
-    std::vector<Vec3f> sorted_positions(total - removed), sorted_normals(total - removed);
-    const std::uint32_t* order = grid.order();
-    std::size_t w = 0;
-    for (std::size_t k = 0; k < total; ++k) {
-      const std::uint32_t i = order[k];
-      if (!keep[i]) continue;
-      sorted_positions[w] = positions[i];
-      sorted_normals[w] = normals[i];
-      ++w;
-    }
-    positions.swap(sorted_positions);
-    normals.swap(sorted_normals);
-    stats.near_duplicates_removed = removed;
+    ThinAndOrder(positions.data(), normals.data(), total, edge_base, face_base, float(4 * d), float(kDuplicateRadius * d), out.positions,
+                 out.normals);
+    stats.near_duplicates_removed = total - out.positions.size();
+  } else {
+    out.positions.assign(positions.data(), positions.data() + total);
+    out.normals.assign(normals.data(), normals.data() + total);
   }
   phase("near-duplicate removal");
-  out.positions = std::move(positions);
-  out.normals = std::move(normals);
   return out;
 }
 

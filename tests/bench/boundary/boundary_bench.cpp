@@ -1,7 +1,9 @@
 // Boundary sampling throughput (issue 3): particles per second for the Stanford bunny scaled to
 // 0.5 m and for a 1-million-triangle torus, volumes included. Prints a table and writes JSON.
 //
-//   rime_bench_boundary [--repeats N] [--threads N] [--json FILE] [--mesh-dir DIR]
+//   rime_bench_boundary [--repeats N] [--threads N] [--json FILE] [--mesh-dir DIR] [--case TEXT]
+//
+// --case runs only the cases whose name contains TEXT (for profiling one of them).
 #include <fmt/format.h>
 
 #include <algorithm>
@@ -89,13 +91,14 @@ nlohmann::json RunCase(const Case& c, int repeats) {
 
 int main(int argc, char** argv) {
   int repeats = 5, threads = 0;
-  std::string json_path = "boundary_bench.json";
+  std::string json_path = "boundary_bench.json", only;
   fs::path mesh_dir = fs::path(RIME_SHARED_DIR) / "meshes";
   for (int i = 1; i + 1 < argc; i += 2) {
     if (!std::strcmp(argv[i], "--repeats")) repeats = std::max(1, std::atoi(argv[i + 1]));
     else if (!std::strcmp(argv[i], "--threads")) threads = std::atoi(argv[i + 1]);
     else if (!std::strcmp(argv[i], "--json")) json_path = argv[i + 1];
     else if (!std::strcmp(argv[i], "--mesh-dir")) mesh_dir = argv[i + 1];
+    else if (!std::strcmp(argv[i], "--case")) only = argv[i + 1];
   }
   if (threads > 0) exec::SetCpuThreads(threads);
   if (std::getenv("RIME_BENCH_VERBOSE")) log::SetLevel(log::Level::kDebug);
@@ -126,7 +129,8 @@ int main(int argc, char** argv) {
              "load s", "sample s", "volume s", "total s", "M part/s", "M/CPU-s");
   fmt::print("|{:-<30}|{:->11}|{:->11}|{:->10}|{:->10}|{:->10}|{:->10}|{:->11}|{:->12}|\n", "", "", "", "", "", "", "", "", "");
   nlohmann::json results = nlohmann::json::array();
-  for (const Case& c : cases) results.push_back(RunCase(c, repeats));
+  for (const Case& c : cases)
+    if (c.name.find(only) != std::string::npos) results.push_back(RunCase(c, repeats));
   fmt::print("(load = mesh file import or procedural tessellation, not included in M part/s; M/CPU-s = particles per\n"
              " second of process CPU time over all threads, which stays meaningful on a machine shared with other work)\n");
   std::ofstream(json_path) << nlohmann::json{{"benchmark", "boundary"}, {"threads", exec::CpuThreads()}, {"repeats", repeats},
