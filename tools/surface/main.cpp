@@ -147,7 +147,7 @@ int main(int argc, char** argv) {
   app.add_option("--lambda", o.lambda, "Yu & Turk centre smoothing, 0 = off (default 0.9)")->check(CLI::Range(0.0, 1.0));
   app.add_option("--kr", o.k_r, "Largest stretch ratio k_r (default 4)")->check(CLI::Range(1.0, 1000.0));
   app.add_option("--ks", o.k_s, "Stretch scale k_s in 1/m^2; 0 = automatic 1/(0.2994 h^2) (default 0)")->check(CLI::NonNegativeNumber);
-  app.add_option("--kn", o.k_n, "Stretch of particles with fewer than N_eps neighbours (default 0.5)")->check(CLI::Range(1e-3, 10.0));
+  app.add_option("--kn", o.k_n, "Stretch of particles with fewer than N_eps neighbours (default 0.5; kernel_sum only: ellipsoids are scaled to the r_iso sphere volume)")->check(CLI::Range(1e-3, 10.0));
   app.add_option("--neps", o.n_eps, "Minimum neighbour count N_eps for a trusted PCA (default 6)")->check(CLI::Range(0, 1000));
   app.add_option("--iso", o.iso, "Iso value of the kernel_sum field (default 0.5)")->check(CLI::PositiveNumber);
   app.add_option("--smooth", o.smooth, "OpenVDB level-set mean-curvature smoothing iterations (default 0)")->check(CLI::Range(0, 100));

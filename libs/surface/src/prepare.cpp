@@ -53,6 +53,25 @@ void EigenvalueRange(const std::array<float, 6>& c, double& lo, double& hi) {
   lo = q + 2 * p * std::cos(phi + 2.0943951023931953);
 }
 
+// s_1 s_2 s_3 = 1 / det D for a stored D = R diag(1/s) Rᵀ.
+double StretchVolume(const std::array<float, 6>& c) {
+  const double a = c[0], b = c[1], d = c[2], xy = c[3], xz = c[4], yz = c[5];
+  return 1 / (a * (b * d - yz * yz) - xy * (xy * d - yz * xz) + xz * (xy * yz - b * xz));
+}
+
+// Stretches as §8 leaves them: within [s_min, s_max] and s_1 / s_k <= k_r (float slack).
+bool WithinBounds(double s_lo, double s_hi, const anisotropy::Params<double>& p) {
+  constexpr double kSlack = 1e-4;
+  return s_lo >= p.s_min * (1 - kSlack) && s_hi <= p.s_max * (1 + kSlack) && s_hi <= s_lo * p.k_r * (1 + kSlack);
+}
+
+// Brings a stored D that breaks them (hand-made or from another tool) back to the §8 bounds.
+void ClampToBounds(Vec3f& s, const anisotropy::Params<double>& p) {
+  const float s_hi = std::min(std::max({s.x, s.y, s.z}), float(p.s_max));
+  const float lo = std::max(float(p.s_min), s_hi / float(p.k_r));
+  for (int k = 0; k < 3; ++k) s[k] = std::clamp(s[k], lo, std::max(lo, s_hi));
+}
+
 }  // namespace
 
 double VoxelSize(const ParticleSet& particles, const Settings& settings) {
@@ -114,6 +133,7 @@ PreparedParticles Prepare(const ParticleSet& particles, const Settings& settings
   // sum the kernel's core radius h s >= Δx/2, so no particle falls between voxels.
   const double level = settings.field == Field::kKernelSum ? h : settings.r_iso * spacing;
   const double s_floor = std::min(1.0, 0.5 * voxel_size / level);
+  const bool unit_volume = settings.field == Field::kEllipsoids;
   // A full neighbourhood (the 26 lattice neighbours within 2h at h = d_p) scaled to h / d_p.
   const double full_count = 26.0 * std::pow(h / spacing, 3);
   anisotropy::Params<float> params;
@@ -146,25 +166,36 @@ PreparedParticles Prepare(const ParticleSet& particles, const Settings& settings
     out.interior[i] = acc.neighbors >= 0.9 * full_count && Norm(mean_offset) < 0.1 * spacing;
     if (!anisotropic) return;
 
-    // D = R diag(1/s) Rᵀ: stretches below the floor are raised (and a non-positive stored D repaired).
+    // D = R diag(1/s) Rᵀ with s within the §8 bounds, of unit volume for ellipsoids, then raised to
+    // the floor (a non-positive stored D is repaired on the way). Eq. 41 has no det G factor as
+    // W_A has: with every s_k <= 1 a surface ellipsoid would be smaller than the interior sphere in
+    // all directions and the surface would sink (1.1 voxels on a lattice ball). Unit volume keeps
+    // the r_iso sphere's volume (the PCA sets the shape, not the size); stretches stay <= s_max,
+    // so a lone protruding particle, elongated outwards by its own weight, does not become a spike.
     anisotropy::Anisotropy<float> a;
     if (stored) {
+      const auto& c = particles.stored_anisotropy[i];
       double lo, hi;
-      EigenvalueRange(particles.stored_anisotropy[i], lo, hi);
-      if (lo > 0 && hi * s_floor <= 1) {  // a valid D already above the floor: keep it as stored
-        out.D[i] = particles.stored_anisotropy[i];
-        out.min_stretch[i] = float(1 / hi);
-        out.max_stretch[i] = float(1 / lo);
+      EigenvalueRange(c, lo, hi);
+      const double scale = unit_volume && lo > 0 ? std::cbrt(StretchVolume(c)) : 1.0;  // D' = D (Π s)^(1/3)
+      if (lo > 0 && WithinBounds(1 / hi, 1 / lo, settings.anisotropy) && hi * scale * s_floor <= 1 &&
+          lo * scale * settings.anisotropy.s_max >= 1) {
+        // Within every bound after scaling: no eigen-solve (most particles).
+        for (int k = 0; k < 6; ++k) out.D[i][k] = float(c[k] * scale);
+        out.min_stretch[i] = float(1 / (hi * scale));
+        out.max_stretch[i] = float(1 / (lo * scale));
         return;
       }
-    }
-    if (stored) {
-      const auto& c = particles.stored_anisotropy[i];
       Vec3f inv_s;
       SymmetricEigen(anisotropy::FromComponents(c.data()), inv_s, a.rotation);
       for (int k = 0; k < 3; ++k) a.stretch[k] = inv_s[k] > 0 ? 1.0f / inv_s[k] : 1.0f;
+      ClampToBounds(a.stretch, settings.anisotropy);
     } else {
       a = anisotropy::Compute(acc.Covariance(params.center_on_particle), acc.neighbors, float(h), params);
+    }
+    if (unit_volume) {
+      a.stretch = a.stretch / std::cbrt(a.stretch.x * a.stretch.y * a.stretch.z);
+      for (int k = 0; k < 3; ++k) a.stretch[k] = std::min(a.stretch[k], float(settings.anisotropy.s_max));
     }
     for (int k = 0; k < 3; ++k) a.stretch[k] = std::max(a.stretch[k], float(s_floor));
     anisotropy::ToComponents(a.D(), out.D[i].data());

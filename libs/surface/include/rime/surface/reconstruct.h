@@ -28,7 +28,8 @@
 namespace rime::surface {
 
 enum class Field {
-  kEllipsoids,  // union of anisotropic ellipsoids, φ = min_i ‖D_i (x − x̄_i)‖ − r_iso (Eq. 41): ice default
+  kEllipsoids,  // union of anisotropic ellipsoids, φ = min_i ‖D_i (x − x̄_i)‖ − r_iso (Eq. 41): ice default;
+                // each of (at most) the volume of the r_iso sphere (det D_i = 1, see Prepare)
   kKernelSum,   // Yu & Turk: Σ_i V_i W_A(x − x̄_i, G_i) at an iso value: water default
   kIsotropic,   // union of spheres of radius r_iso (comparison baseline)
 };
@@ -92,7 +93,8 @@ struct Result {
 struct PreparedParticles {
   std::vector<Vec3f> centers;              // x̄_i relative to origin, m
   Vec3d origin;                            // subtracted from positions (float precision far from 0)
-  std::vector<std::array<float, 6>> D;     // dimensionless D_i (ellipsoids) — empty in isotropic mode
+  std::vector<std::array<float, 6>> D;     // dimensionless D_i — empty in isotropic mode; ellipsoids:
+                                           // det D = 1 unless a stretch hit s_max or the half-voxel floor
   std::vector<float> min_stretch, max_stretch;  // 1/λ_max(D), 1/λ_min(D)
   std::vector<std::uint8_t> interior;      // 1: fully surrounded (its far band cannot be the nearest)
 };
