@@ -2,10 +2,16 @@
 // degenerate and badly shaped input, bad input.
 #include <gtest/gtest.h>
 
+#include <tbb/global_control.h>
+#include <tbb/task_arena.h>
+
+#include <algorithm>
 #include <cmath>
+#include <random>
 
 #include "rime/boundary/sampler.h"
 #include "rime/boundary/shapes.h"
+#include "rime/boundary/volumes.h"
 #include "rime/core/error.h"
 #include "test_helpers.h"
 
@@ -175,6 +181,59 @@ TEST(SampleSurface, BadInput) {
   flat.positions = {Vec3f(0, 0, 0), Vec3f(1, 0, 0), Vec3f(2, 0, 0)};
   flat.triangles = {{0, 1, 2}};
   ExpectBadInput(flat, 0.1, "degenerate");
+}
+
+// Runs f on exactly `threads` worker threads (more than the machine's cores is fine).
+template <class F>
+void WithThreads(int threads, F&& f) {
+  tbb::global_control limit(tbb::global_control::max_allowed_parallelism, std::size_t(threads));
+  tbb::task_arena arena(threads);
+  arena.execute(f);
+}
+
+// Same particles in the same order, same statistics and bit-identical volumes for any number of
+// threads: welding and the incidence lists use atomics, thinning decides in parallel rounds.
+TEST(SampleSurface, DeterministicAcrossThreadCounts) {
+  // Two intersecting tori as a shuffled triangle soup (every triangle with its own vertices, so
+  // all of them are welded), with edges finer than the spacing so that thinning decides a lot.
+  io::TriMesh soup;
+  std::mt19937 rng(3);
+  for (const Vec3f offset : {Vec3f(0, 0, 0), Vec3f(0.3f, 0.1f, 0.05f)}) {
+    const io::TriMesh torus = MakeTorus(0.4, 0.12, 0.006);
+    for (const auto& t : torus.triangles) {
+      const auto base = std::uint32_t(soup.positions.size());
+      for (int k = 0; k < 3; ++k) soup.positions.push_back(torus.positions[t[k]] + offset);
+      soup.triangles.push_back({base, base + 1, base + 2});
+    }
+  }
+  std::shuffle(soup.triangles.begin(), soup.triangles.end(), rng);
+  for (double spacing : {0.015, 0.007}) {
+    SCOPED_TRACE(::testing::Message() << "spacing " << spacing);
+    SurfaceSamples reference;
+    std::vector<float> reference_volumes;
+    WithThreads(1, [&] {
+      reference = Sample(soup, spacing);
+      reference_volumes = ComputeBoundaryVolumes<float>(exec::Device::Cpu(), reference.positions, float(2 * spacing));
+    });
+    ASSERT_GT(reference.size(), 10000u);
+    EXPECT_GT(reference.stats.near_duplicates_removed, 500u);
+    for (int threads : {2, 3, 8}) {
+      SCOPED_TRACE(::testing::Message() << threads << " threads");
+      WithThreads(threads, [&] {
+        const SurfaceSamples s = Sample(soup, spacing);
+        ASSERT_EQ(s.size(), reference.size());
+        EXPECT_EQ(s.stats.near_duplicates_removed, reference.stats.near_duplicates_removed);
+        EXPECT_EQ(s.stats.edges, reference.stats.edges);
+        EXPECT_EQ(s.stats.welded_vertices, reference.stats.welded_vertices);
+        for (std::size_t i = 0; i < s.size(); ++i) {
+          ASSERT_EQ(s.positions[i], reference.positions[i]) << "particle " << i;
+          ASSERT_EQ(s.normals[i], reference.normals[i]) << "particle " << i;
+        }
+        const std::vector<float> volumes = ComputeBoundaryVolumes<float>(exec::Device::Cpu(), s.positions, float(2 * spacing));
+        ASSERT_EQ(volumes, reference_volumes);
+      });
+    }
+  }
 }
 
 TEST(NearestNeighborDistances, MatchesBruteForce) {
