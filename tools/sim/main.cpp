@@ -3,6 +3,7 @@
 #include <csignal>
 #include <filesystem>
 #include <fstream>
+#include <future>
 #include <regex>
 
 #include <fmt/format.h>
@@ -46,6 +47,38 @@ std::int64_t LastCompleteFrame(const fs::path& folder) {
   }
   return last;
 }
+
+// Writes output frames on a background thread, so that HDF5 compression and disk writes overlap
+// the next frame's steps (the snapshot itself is taken on the simulation thread). One write is in
+// flight at a time and each job writes the frame before the sequence index and the stats log that
+// list it, so a frame is listed only once it is complete. A failed write (disk full) is rethrown
+// by the next Submit or by Finish; if the simulation stops with an error first, the destructor
+// still waits for the write in flight, so every frame it reported as complete is on disk.
+class FrameWriter {
+ public:
+  FrameWriter() = default;
+  FrameWriter(const FrameWriter&) = delete;
+  FrameWriter& operator=(const FrameWriter&) = delete;
+  ~FrameWriter() {
+    if (!pending_.valid()) return;
+    try {
+      pending_.get();
+    } catch (const std::exception& e) {
+      rime::log::Error("{}", e.what());
+    }
+  }
+  template <class Job>
+  void Submit(Job job) {
+    Finish();
+    pending_ = std::async(std::launch::async, std::move(job));
+  }
+  void Finish() {
+    if (pending_.valid()) pending_.get();
+  }
+
+ private:
+  std::future<void> pending_;
+};
 
 template <class T>
 int Run(const rime::io::Scene& scene, const Options& opt, const rime::tool::CommonOptions& common) {
@@ -105,6 +138,7 @@ int Run(const rime::io::Scene& scene, const Options& opt, const rime::tool::Comm
   std::int64_t total_steps = 0, total_iterations = 0, particle_steps = 0, removed = 0;
   double max_speed = 0, worst_error = 0;
   Progress progress("frames", last_frame - first_frame);
+  FrameWriter writer;
   for (std::int64_t f = first_frame + 1; f <= last_frame; ++f) {
     const double stop = f / fps;
     const auto frame_start = std::chrono::steady_clock::now();
@@ -132,9 +166,7 @@ int Run(const rime::io::Scene& scene, const Options& opt, const rime::tool::Comm
       if (!s.converged) log::Debug("step {}: pressure solve stopped at {} iterations", sim.step_count(), s.pressure_iterations);
       progress.Update(f - 1 - first_frame, fmt::format("t={:.3f}s dt={:.2g}s {} it", sim.time(), dt, s.pressure_iterations));
     }
-    io::WriteParticleFrame(io::FramePath(out, "particles", f, "h5part"), sim.Snapshot(f));
     index.push_back({io::FramePath(out, "particles", f, "h5part"), f / fps});
-    io::WriteSequenceIndex(out / "particles.h5part", index);
     const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - frame_start).count();
     json line = {{"frame", f},
                  {"time", sim.time()},
@@ -153,13 +185,18 @@ int Run(const rime::io::Scene& scene, const Options& opt, const rime::tool::Comm
     stats_lines.push_back(line.dump());
     std::string stats_text;
     for (const std::string& l : stats_lines) stats_text += l + "\n";
-    WriteFileAtomically(stats_path, stats_text);
+    writer.Submit([frame = sim.Snapshot(f), index, stats_text, &out, &stats_path, path = index.back().frame_file] {
+      io::WriteParticleFrame(path, frame);
+      io::WriteSequenceIndex(out / "particles.h5part", index);
+      WriteFileAtomically(stats_path, stats_text);
+    });
     total_steps += steps;
     total_iterations += iterations;
     max_speed = std::max(max_speed, frame_speed);
     worst_error = std::max(worst_error, max_error);
     progress.Update(f - first_frame, fmt::format("t={:.3f}s", sim.time()));
   }
+  writer.Finish();
   progress.Finish();
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - wall_start).count();
   const auto& t = sim.timings();

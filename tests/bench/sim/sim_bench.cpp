@@ -1,7 +1,9 @@
 // Simulation benchmark: the PERFORMANCE.md dam break (1x1x1 m block in the corner of a 4x3x1.5 m
 // box, fixed dt = 1 ms, eta = 0.1 %, Akinci boundaries at half spacing) at ~50k and ~200k water
 // particles, with module variants side by side. Prints a table and writes JSON.
-//   rime-bench-sim [--steps N] [--repeats R] [--json FILE] [--quick]
+//   rime-bench-sim [--steps N] [--warmup N] [--repeats R] [--json FILE] [--quick] [--only NAME]
+// The reference protocol (PERFORMANCE.md averages 1 s of simulated time from the start):
+//   rime-bench-sim --warmup 0 --steps 1000 --repeats 1 --only "dam break 50k"
 #include <sys/resource.h>
 
 #include <CLI/CLI.hpp>
@@ -51,7 +53,7 @@ double Median(std::vector<double> v) {
   return v[v.size() / 2];
 }
 
-Result Run(const std::string& name, const io::Scene& scene, int steps, int repeats) {
+Result Run(const std::string& name, const io::Scene& scene, int warmup, int steps, int repeats) {
   Result r;
   r.name = name;
   std::vector<double> ms, nb, fo, pr, in, fz, it;
@@ -59,7 +61,7 @@ Result Run(const std::string& name, const io::Scene& scene, int steps, int repea
     sph::Simulation<float> sim(scene, exec::Device::Cpu());
     sim.AddBoundaryObject(sph::test::BoxBoundary(scene.fluid.spacing, 4.0, 3.0, 1.5), "box");
     sim.Initialize();
-    for (int s = 0; s < 20; ++s) sim.Step(0.001);  // let the block start falling
+    for (int s = 0; s < warmup; ++s) sim.Step(0.001);  // let the block start falling
     sim.EnableTimings(true);
     std::int64_t iterations = 0;
     const auto t0 = std::chrono::steady_clock::now();
@@ -89,10 +91,13 @@ Result Run(const std::string& name, const io::Scene& scene, int steps, int repea
 
 int main(int argc, char** argv) {
   CLI::App app{"Rime simulation benchmark (dam break)"};
-  int steps = 50, repeats = 3, threads = 0;
+  int steps = 50, warmup = 20, repeats = 3, threads = 0;
+  std::string only;
   std::string json_path = "sim_bench.json";
   bool quick = false;
   app.add_option("--steps", steps, "Timed steps per run");
+  app.add_option("--warmup", warmup, "Untimed steps before the timed ones (the block starts falling)");
+  app.add_option("--only", only, "Run only the case of this name");
   app.add_option("--repeats", repeats, "Runs per case (the median is reported)");
   app.add_option("-j,--threads", threads, "CPU threads (default all)");
   app.add_option("--json", json_path, "JSON output file");
@@ -101,13 +106,23 @@ int main(int argc, char** argv) {
   exec::SetCpuThreads(threads);
   const double dp = 0.0264;
   std::vector<Result> results;
-  results.push_back(Run("dam break 50k", DamBreak(dp, 1.0, {"gravity"}), steps, repeats));
-  results.push_back(Run("dam break 50k + viscosity", DamBreak(dp, 1.0, {"gravity", "viscosity"}), steps, repeats));
-  results.push_back(Run("dam break 50k + surface tension", DamBreak(dp, 1.0, {"gravity", "surface_tension"}), steps, repeats));
-  results.push_back(Run("dam break 50k + viscosity + freezing", DamBreak(dp, 1.0, {"gravity", "viscosity", "freezing"}), steps, repeats));
-  if (!quick) results.push_back(Run("dam break 200k", DamBreak(dp, 1.6, {"gravity"}), steps, repeats));
-  std::printf("\nRime simulation benchmark, %d CPU threads, float, dt = 1 ms, eta = 0.1 %%, median of %d runs of %d steps\n",
-              exec::CpuThreads(), repeats, steps);
+  const std::vector<std::pair<std::string, io::Scene>> cases = {
+      {"dam break 50k", DamBreak(dp, 1.0, {"gravity"})},
+      {"dam break 50k + viscosity", DamBreak(dp, 1.0, {"gravity", "viscosity"})},
+      {"dam break 50k + surface tension", DamBreak(dp, 1.0, {"gravity", "surface_tension"})},
+      {"dam break 50k + viscosity + freezing", DamBreak(dp, 1.0, {"gravity", "viscosity", "freezing"})},
+      {"dam break 200k", DamBreak(dp, 1.6, {"gravity"})}};
+  for (const auto& [name, scene] : cases) {
+    if (!only.empty() && name != only) continue;
+    if (only.empty() && quick && name == "dam break 200k") continue;
+    results.push_back(Run(name, scene, warmup, steps, repeats));
+  }
+  if (results.empty()) {
+    std::fprintf(stderr, "rime-bench-sim: no case named \"%s\"\n", only.c_str());
+    return 2;
+  }
+  std::printf("\nRime simulation benchmark, %d CPU threads, float, dt = 1 ms, eta = 0.1 %%, median of %d runs of %d steps after %d warm-up steps\n",
+              exec::CpuThreads(), repeats, steps, warmup);
   std::printf("%-38s %8s %8s %9s %9s %8s %8s %8s %8s %8s %7s %9s\n", "case", "water", "boundary", "ms/step", "us/p-step", "neighb.",
               "forces", "pressure", "integr.", "freezing", "iter.", "peak MiB");
   nlohmann::json out = nlohmann::json::array();
@@ -119,7 +134,8 @@ int main(int argc, char** argv) {
                    {"us_per_particle_step", r.us_particle_step}, {"neighbor_search_ms", r.neighbors}, {"non_pressure_ms", r.forces},
                    {"pressure_solve_ms", r.pressure}, {"integration_ms", r.integration}, {"freezing_ms", r.freezing},
                    {"pressure_iterations", r.iterations},
-                   {"peak_memory_mib", r.memory_mib}, {"threads", exec::CpuThreads()}});
+                   {"peak_memory_mib", r.memory_mib}, {"threads", exec::CpuThreads()}, {"warmup_steps", warmup}, {"timed_steps", steps},
+                   {"repeats", repeats}});
   }
   std::ofstream(json_path) << out.dump(2) << "\n";
   std::printf("(peak memory is the process maximum so far, so it is cumulative down the table)\nwrote %s\n", json_path.c_str());

@@ -95,6 +95,20 @@ TEST_F(SimTool, DivergenceStopsWithAClearMessageAndKeepsEarlierFrames) {
   EXPECT_GE(frames, 1);
 }
 
+// Frames are written in the background while the next frame simulates: a write that fails (here a
+// directory stands where frame 2 must go; disk full behaves alike) still stops the run with the
+// file named and an I/O exit code, and the frames before it are complete.
+TEST_F(SimTool, FailedBackgroundFrameWriteStopsTheRunWithTheFileNamed) {
+  const fs::path scene = WriteScene("", 0.2, 30);
+  MakeBoundary(scene);
+  fs::create_directories(dir_ / "sim" / "particles.0002.h5part" / "occupied");
+  const Result r = Exec(Sim(scene, "sim"));
+  EXPECT_EQ(r.code, 5) << r.output;
+  EXPECT_NE(r.output.find("particles.0002.h5part"), std::string::npos) << r.output;
+  EXPECT_NO_THROW(rime::io::ReadParticleFrame(dir_ / "sim" / "particles.0001.h5part", "particles"));
+  EXPECT_FALSE(fs::exists(dir_ / "sim" / "particles.0006.h5part")) << "the run went on after the failed write";
+}
+
 TEST_F(SimTool, ResumeReproducesTheUninterruptedFrames) {
   const fs::path scene = WriteScene("");
   MakeBoundary(scene);
