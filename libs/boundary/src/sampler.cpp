@@ -3,9 +3,6 @@
 #include <fmt/format.h>
 #include <tbb/parallel_for.h>
 
-#ifdef __linux__
-#include <sys/mman.h>
-#endif
 
 #include <algorithm>
 #include <array>
@@ -95,26 +92,14 @@ Vec3f UnitOr(const Vec3d& v, const Vec3d& fallback) {
 }
 
 // Storage for arrays whose elements are all written before they are read: no value-initialisation
-// (a vector's zero fill runs on one thread and takes every page fault there); large ones ask for
-// transparent huge pages, which cuts the page faults of first touch 512-fold where the kernel
-// grants them. Sampling a large mesh touches several hundred MB of such arrays.
+// (a vector's zero fill runs on one thread and takes every page fault there; here the first touch
+// happens in the parallel loops). Sampling a large mesh touches a few hundred MB of such arrays.
 template <class T>
 class Scratch {
   static_assert(std::is_trivially_copyable_v<T> && std::is_trivially_destructible_v<T>);
 
  public:
-  explicit Scratch(std::size_t n) : n_(n) {
-    constexpr std::size_t kHuge = std::size_t(2) << 20;
-    const std::size_t bytes = std::max<std::size_t>(n * sizeof(T), 1);
-    if (bytes >= 2 * kHuge) {
-      const std::size_t rounded = (bytes + kHuge - 1) / kHuge * kHuge;
-      data_.reset(static_cast<T*>(std::aligned_alloc(kHuge, rounded)));
-#ifdef __linux__
-      if (data_) madvise(data_.get(), rounded, MADV_HUGEPAGE);  // a hint; failure is harmless
-#endif
-    } else {
-      data_.reset(static_cast<T*>(std::malloc(bytes)));
-    }
+  explicit Scratch(std::size_t n) : data_(static_cast<T*>(std::malloc(std::max<std::size_t>(n * sizeof(T), 1)))), n_(n) {
     if (!data_) throw std::bad_alloc();
   }
   T& operator[](std::size_t i) { return data_.get()[i]; }
@@ -376,17 +361,18 @@ SurfaceSamples SampleSurface(const io::TriMesh& mesh, const SampleOptions& optio
   // 2. Valid triangles and their area vectors.
   const std::size_t nt = mesh.triangles.size();
   Scratch<std::array<std::uint32_t, 3>> tris(nt);
-  Scratch<Vec3d> area_vectors(nt);
+  Scratch<Vec3f> area_vectors(nt);  // computed in double, kept in float: they only give directions
   Scratch<std::uint8_t> valid(nt);
   exec::cpu::ParallelFor(Index(nt), [&](Index t) {
     const auto& src = mesh.triangles[t];
     const std::array<std::uint32_t, 3> w{weld[src[0]], weld[src[1]], weld[src[2]]};
     tris[t] = w;
     const Vec3d a = wp(w[0]), b = wp(w[1]), c = wp(w[2]);
-    area_vectors[t] = Cross(b - a, c - a);
+    const Vec3d area = Cross(b - a, c - a);
+    area_vectors[t] = Vec3f(area);
     const double longest = std::max({SquaredNorm(b - a), SquaredNorm(c - b), SquaredNorm(a - c)});
     const bool repeated = w[0] == w[1] || w[1] == w[2] || w[0] == w[2];
-    valid[t] = !repeated && Norm(area_vectors[t]) > 1e-10 * longest;  // zero area up to round-off
+    valid[t] = !repeated && Norm(area) > 1e-10 * longest;  // zero area up to round-off
   });
   const std::size_t valid_count = std::size_t(DeterministicSum(nt, [&](std::size_t t) { return double(valid[t]); }));
   stats.degenerate_skipped = nt - valid_count;
@@ -422,8 +408,9 @@ SurfaceSamples SampleSurface(const io::TriMesh& mesh, const SampleOptions& optio
         LocalEdge* found = nullptr;
         for (LocalEdge& e : local)
           if (e.b == b) found = &e;
-        if (found) found->normal_sum += area_vectors[t];
-        else local.push_back({b, area_vectors[t], area_vectors[t]});
+        const Vec3d area(area_vectors[t]);
+        if (found) found->normal_sum += area;
+        else local.push_back({b, area, area});
       }
     }
   };
@@ -432,8 +419,8 @@ SurfaceSamples SampleSurface(const io::TriMesh& mesh, const SampleOptions& optio
   exec::cpu::ParallelFor(Index(nw), [&](Index a) {
     Vec3d sum(0, 0, 0), fallback(0, 0, 0);
     for (std::uint32_t k = incident_offset[a]; k < incident_offset[a + 1]; ++k) {
-      sum += area_vectors[incident[k]];
-      fallback = area_vectors[incident[k]];
+      fallback = Vec3d(area_vectors[incident[k]]);
+      sum += fallback;
     }
     vertex_normals[a] = UnitOr(sum, fallback);
     used_slot[a] = incident_offset[a + 1] > incident_offset[a];
@@ -485,7 +472,7 @@ SurfaceSamples SampleSurface(const io::TriMesh& mesh, const SampleOptions& optio
   exec::cpu::ParallelFor(Index(nt), [&](Index t) {
     if (face_offset[t + 1] == face_offset[t]) return;
     std::size_t slot = face_base + face_offset[t];
-    const Vec3f normal = UnitOr(area_vectors[t], area_vectors[t]);
+    const Vec3f normal = UnitOr(Vec3d(area_vectors[t]), Vec3d(area_vectors[t]));
     SampleFaceInterior(triangle(t), d, [&](const Vec3d& p) {
       positions[slot] = Vec3f(p);
       normals[slot] = normal;

@@ -82,6 +82,11 @@ void ComputeBoundaryVolumes(const exec::Device& device, const Vec3<T>* positions
 
 template <class T>
 std::vector<T> ComputeBoundaryVolumes(const exec::Device& device, const std::vector<Vec3<T>>& positions, T h) {
+  if (!device.is_cuda()) {  // host memory is device memory: no copies
+    std::vector<T> volumes(positions.size());
+    ComputeBoundaryVolumes(device, positions.data(), static_cast<Index>(positions.size()), h, volumes.data());
+    return volumes;
+  }
   exec::DeviceArray<Vec3<T>> d_positions(device, positions);
   exec::DeviceArray<T> d_volumes(device, positions.size());
   ComputeBoundaryVolumes(device, d_positions.data(), static_cast<Index>(positions.size()), h, d_volumes.data());

@@ -1,9 +1,11 @@
 #include "rime/neighbors/grid.h"
 
 #include <fmt/format.h>
+#include <tbb/parallel_reduce.h>
 
 #include <bit>
 #include <cmath>
+#include <limits>
 
 #include "rime/core/error.h"
 #include "rime/exec/kernel_list.h"
@@ -13,6 +15,34 @@
 RIME_NEIGHBORS_KERNELS(RIME_INSTANTIATE_CPU_KERNEL)
 
 namespace rime::neighbors {
+namespace {
+
+// Bounding box in one parallel pass over the points, without the device path's 6n scratch copy.
+// Minimum and maximum are exact, so any split gives the same box; a NaN or infinite coordinate
+// makes the box NaN, as the device path's NaN-propagating maximum does.
+template <class T>
+void CpuBounds(const Vec3<T>* points, Index n, Vec3<T>& lo, Vec3<T>& hi) {
+  struct Box {
+    Vec3<T> lo, hi;
+    bool finite = true;
+  };
+  const Box box = tbb::parallel_reduce(
+      tbb::blocked_range<Index>(0, n, 4096), Box{points[0], points[0]},
+      [&](const tbb::blocked_range<Index>& r, Box b) {
+        for (Index i = r.begin(); i != r.end(); ++i) {
+          const Vec3<T> p = points[i];
+          b.finite = b.finite && IsFinite(p);
+          b.lo = Min(b.lo, p), b.hi = Max(b.hi, p);
+        }
+        return b;
+      },
+      [](Box a, const Box& b) { return Box{Min(a.lo, b.lo), Max(a.hi, b.hi), a.finite && b.finite}; });
+  const T nan = std::numeric_limits<T>::quiet_NaN();
+  lo = box.finite ? box.lo : Vec3<T>(nan, nan, nan);
+  hi = box.finite ? box.hi : Vec3<T>(nan, nan, nan);
+}
+
+}  // namespace
 
 template <class T>
 UniformGrid<T>::UniformGrid(const exec::Device& device)
@@ -49,12 +79,16 @@ void UniformGrid<T>::BuildImpl(const Vec3<T>* points, Index n, T cell_size, cons
   if (n == 0) return;
 
   // Bounding box -> origin one cell below the minimum, so every point sits in a cell >= 1.
-  bounds_scratch_.resize(6 * n);
-  exec::ParallelFor(device_, n, kernels::BoundsComponents<T>{points, n, bounds_scratch_.data()});
   Vec3<T> lo, hi;
-  for (int a = 0; a < 3; ++a) {
-    lo[a] = -exec::Max(device_, bounds_scratch_.data() + a * n, n);
-    hi[a] = exec::Max(device_, bounds_scratch_.data() + (3 + a) * n, n);
+  if (device_.is_cuda()) {
+    bounds_scratch_.resize(6 * n);
+    exec::ParallelFor(device_, n, kernels::BoundsComponents<T>{points, n, bounds_scratch_.data()});
+    for (int a = 0; a < 3; ++a) {
+      lo[a] = -exec::Max(device_, bounds_scratch_.data() + a * n, n);
+      hi[a] = exec::Max(device_, bounds_scratch_.data() + (3 + a) * n, n);
+    }
+  } else {
+    CpuBounds(points, n, lo, hi);
   }
   if (!IsFinite(lo) || !IsFinite(hi)) throw Error(ExitCode::kDiverged, "neighbor grid: a particle position is NaN or infinite");
   const T extent = std::max({hi.x - lo.x, hi.y - lo.y, hi.z - lo.z});
