@@ -232,18 +232,22 @@ struct CellHood {
                     grid.origin.y + float(grid.CellCoord(p.y, grid.origin.y)) * size,
                     grid.origin.z + float(grid.CellCoord(p.z, grid.origin.z)) * size);
     }
+    // The cell itself first: on a crowded surface most particles have a close one in their own cell.
+    for (int k = 1; k < count; ++k)
+      if (begin[k] == grid.cell_start[cell]) std::swap(begin[0], begin[k]), std::swap(end[0], end[k]), std::swap(lo[0], lo[k]);
   }
-  // Whether a sorted slot t != self with wanted(t) lies closer than sqrt(r2) to p.
-  template <class Wanted>
-  bool AnyWithin(const Vec3f* sorted, float size, const Vec3f& p, std::uint32_t self, float r2, Wanted&& wanted) const {
+  // Whether a point of points[begin[k], stop(k)) over the cells k, other than slot `self`, lies
+  // closer than sqrt(r2) to p (cells farther than that are skipped).
+  template <class Stop>
+  bool AnyWithin(const Vec3f* points, float size, const Vec3f& p, std::uint32_t self, float r2, Stop&& stop) const {
     const float slack = 1e-4f * size;  // cell boxes from floor(): never skip a cell by round-off
     for (int k = 0; k < count; ++k) {
       const float gx = std::max(std::max(lo[k].x - p.x, p.x - lo[k].x - size) - slack, 0.0f);
       const float gy = std::max(std::max(lo[k].y - p.y, p.y - lo[k].y - size) - slack, 0.0f);
       const float gz = std::max(std::max(lo[k].z - p.z, p.z - lo[k].z - size) - slack, 0.0f);
       if (gx * gx + gy * gy + gz * gz >= r2) continue;
-      for (std::uint32_t t = begin[k]; t < end[k]; ++t)
-        if (t != self && SquaredNorm(sorted[t] - p) < r2 && wanted(t)) return true;
+      for (std::uint32_t t = begin[k], e = stop(k); t < e; ++t)
+        if (SquaredNorm(points[t] - p) < r2 && t != self) return true;
     }
     return false;
   }
@@ -272,31 +276,43 @@ void ThinAndOrder(const Vec3f* positions, const Vec3f* normals, std::size_t tota
     kind[s] = i < edge_base ? 0 : (i < face_base ? 1 : 2);
   });
   const float r2 = radius * radius;
-  // keep = 1 for particles alone within the radius, 0 (undecided) for the others.
+  // keep = 1 for particles alone within the radius, 0 (undecided) for the others. The kept
+  // particles of each cell are also packed at the cell's first slots of kept_at (kept_n of them,
+  // stored at the cell's first slot), so that deciding a particle scans kept ones only.
+  Scratch<Vec3f> kept_at(total);
+  Scratch<std::uint32_t> kept_n(total);
   exec::cpu::ParallelFor(Index(cells), [&](Index cell) {
+    const std::uint32_t begin = view.cell_start[cell], end = view.cell_start[cell + 1];
     const CellHood hood(view, sorted.data(), cell_size, std::uint32_t(cell));
-    bool crowded = false;
-    for (std::uint32_t s = view.cell_start[cell]; s < view.cell_start[cell + 1]; ++s) {
-      undecided[s] = hood.AnyWithin(sorted.data(), cell_size, sorted[s], s, r2, [](std::uint32_t) { return true; });
+    std::uint32_t n_kept = 0;
+    for (std::uint32_t s = begin; s < end; ++s) {
+      // The next slots first: on a crowded surface they are usually close (same cell, input order).
+      const bool near_next = (s > 0 && SquaredNorm(sorted[s - 1] - sorted[s]) < r2) || (s + 1 < total && SquaredNorm(sorted[s + 1] - sorted[s]) < r2);
+      undecided[s] = near_next || hood.AnyWithin(sorted.data(), cell_size, sorted[s], s, r2, [&](int k) { return hood.end[k]; });
       keep[s] = !undecided[s];
-      crowded = crowded || undecided[s];
+      if (keep[s]) kept_at[begin + n_kept++] = sorted[s];
     }
-    const Vec3f p = sorted[view.cell_start[cell]];
-    cell_parity[cell] = !crowded ? 8
-                                 : std::uint8_t((view.CellCoord(p.x, view.origin.x) & 1) | (view.CellCoord(p.y, view.origin.y) & 1) << 1 |
-                                                (view.CellCoord(p.z, view.origin.z) & 1) << 2);
+    kept_n[begin] = n_kept;
+    const Vec3f p = sorted[begin];
+    cell_parity[cell] = n_kept == end - begin
+                            ? 8
+                            : std::uint8_t((view.CellCoord(p.x, view.origin.x) & 1) | (view.CellCoord(p.y, view.origin.y) & 1) << 1 |
+                                           (view.CellCoord(p.z, view.origin.z) & 1) << 2);
   });
   std::vector<std::uint32_t> rounds[8];  // crowded cells by parity, in cell order
   for (std::uint32_t cell = 0; cell < cells; ++cell)
     if (cell_parity[cell] < 8) rounds[cell_parity[cell]].push_back(cell);
-  const auto kept = [&](std::uint32_t t) { return keep[t] != 0; };
   for (std::uint8_t cls = 0; cls < 3; ++cls)
     for (const std::vector<std::uint32_t>& round : rounds)
       exec::cpu::ParallelFor(Index(round.size()), [&](Index r) {
-        const std::uint32_t cell = round[r];
+        const std::uint32_t cell = round[r], begin = view.cell_start[cell];
         const CellHood hood(view, sorted.data(), cell_size, cell);
-        for (std::uint32_t s = view.cell_start[cell]; s < view.cell_start[cell + 1]; ++s)
-          if (undecided[s] && kind[s] == cls) keep[s] = !hood.AnyWithin(sorted.data(), cell_size, sorted[s], s, r2, kept);
+        const auto kept_end = [&](int k) { return hood.begin[k] + kept_n[hood.begin[k]]; };
+        for (std::uint32_t s = begin; s < view.cell_start[cell + 1]; ++s) {
+          if (!undecided[s] || kind[s] != cls) continue;
+          keep[s] = !hood.AnyWithin(kept_at.data(), cell_size, sorted[s], ~0u, r2, kept_end);
+          if (keep[s]) kept_at[begin + kept_n[begin]++] = sorted[s];
+        }
       });
   Scratch<std::uint32_t> slot(total);
   exec::cpu::ParallelFor(Index(total), [&](Index s) { slot[s] = keep[s]; });
