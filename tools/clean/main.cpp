@@ -59,7 +59,7 @@ Frame ParseName(const fs::path& input) {
 
 /// Overrides: options given on the command line replace the scene's (or default) values.
 struct Overrides {
-  std::optional<std::string> repair, smooth, self_intersections;
+  std::optional<std::string> repair, smooth, self_intersections, decimate_method;
   std::optional<bool> remesh;
   std::optional<int> min_component_faces, max_hole_edges, remesh_iterations, smooth_iterations, shape_smooth_iterations;
   std::optional<double> cap_angle, needle_ratio, min_component_area, min_component_volume, target_edge, target_edge_factor,
@@ -93,6 +93,7 @@ struct Overrides {
     if (decimate_ratio) s.decimate_ratio = *decimate_ratio;
     if (decimate_faces) s.decimate_faces = *decimate_faces;
     if (decimate_max_error) s.decimate_max_error = *decimate_max_error;
+    if (decimate_method) s.decimate_method = *decimate_method;
     if (self_intersections) s.self_intersections = *self_intersections;
     if (no_velocity) s.transfer_velocity = false;
   }
@@ -163,6 +164,9 @@ int main(int argc, char** argv) {
   g->add_option("--decimate-max-error", o.decimate_max_error,
                 "6. Also stop when a collapse would cost more than this quadric error, m (0 = off) [0]")
       ->check(CLI::NonNegativeNumber);
+  g->add_option("--decimate-method", o.decimate_method,
+                "6. batch (rime's quadric collapse in sorted passes, fast) or cgal (CGAL edge_collapse) [" + d.decimate_method + "]")
+      ->check(CLI::IsMember({"batch", "cgal"}));
   g->add_option("--smooth", o.smooth, "7. tangential (relaxation, keeps volume), angle, none [" + d.smooth + "]")
       ->check(CLI::IsMember({"tangential", "angle", "none"}));
   g->add_option("--smooth-iterations", o.smooth_iterations, fmt::format("7. Smoothing iterations [{}]", d.smooth_iterations))

@@ -32,6 +32,7 @@ void ParseCleanupSettings(TomlReader& t, CleanupSettings& s) {
   s.shape_smooth_time = t.Number("shape_smooth_time", s.shape_smooth_time, Range::Positive());
 
   s.decimate = t.Bool("decimate", s.decimate);
+  s.decimate_method = t.String("decimate_method", s.decimate_method, {"batch", "cgal"});
   s.decimate_ratio = t.Number("decimate_ratio", s.decimate_ratio, Range{0, 1, true, false});
   s.decimate_faces = t.Integer("decimate_faces", s.decimate_faces, Range::Closed(0, 1e15));
   s.decimate_max_error = t.Number("decimate_max_error", s.decimate_max_error, Range::NonNegative());

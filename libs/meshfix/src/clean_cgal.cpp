@@ -4,7 +4,8 @@
 // Costs measured with CGAL 5.5.1 on a closed 438k-triangle mesh, one thread (LIBRARY_NOTES.md):
 // soup repair on load 2.2 s, isotropic remeshing 3.9 s per pass, angle smoothing 2.1 s, tangential
 // relaxation 0.3 s, Garland-Heckbert decimation to half 2.6 s. Hence the defaults: build the
-// Surface_mesh directly (soup repair only as a fallback), no remeshing, tangential relaxation.
+// Surface_mesh directly (soup repair only as a fallback), no remeshing, tangential relaxation,
+// and decimation by rime's own batched collapse (decimate.cpp; CGAL's stays selectable).
 #include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
 #include <CGAL/Polygon_mesh_processing/angle_and_area_smoothing.h>
 #include <CGAL/Polygon_mesh_processing/border.h>
@@ -27,6 +28,8 @@
 #include <CGAL/Surface_mesh_simplification/edge_collapse.h>
 #include <fmt/format.h>
 
+#include <time.h>
+
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -35,6 +38,7 @@
 #include "rime/core/error.h"
 #include "rime/core/log.h"
 #include "rime/meshfix/clean.h"
+#include "rime/meshfix/decimate.h"
 
 namespace rime::meshfix {
 namespace {
@@ -50,6 +54,12 @@ namespace SMS = CGAL::Surface_mesh_simplification;
 namespace params = CGAL::parameters;
 
 constexpr double kPi = 3.14159265358979323846;
+
+double ProcessCpuSeconds() {
+  timespec t{};
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t);
+  return double(t.tv_sec) + 1e-9 * double(t.tv_nsec);
+}
 
 bool RepeatsVertex(const std::array<std::uint32_t, 3>& t) { return t[0] == t[1] || t[1] == t[2] || t[0] == t[2]; }
 
@@ -161,10 +171,11 @@ class Chain {
   template <class Body>
   void Run(const char* name, Body&& body) {
     const auto start = std::chrono::steady_clock::now();
+    const double cpu_start = ProcessCpuSeconds();
     std::string detail = body();
     const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     log::Debug("{}: {} ({:.3f} s)", name, detail, seconds);
-    report_.operations.push_back({name, seconds, std::move(detail)});
+    report_.operations.push_back({name, seconds, ProcessCpuSeconds() - cpu_start, std::move(detail)});
   }
 
   void Load(const io::TriMesh& in) {
@@ -359,13 +370,35 @@ class Chain {
       const std::size_t target_faces = settings_.decimate_faces > 0 ? std::size_t(settings_.decimate_faces)
                                                                     : std::size_t(std::llround(settings_.decimate_ratio * double(faces)));
       if (target_faces >= faces && settings_.decimate_max_error <= 0) return std::string("nothing to do");
+      if (settings_.decimate_method == "batch") {
+        mesh_.collect_garbage();  // vertex and face indices become 0..n-1
+        std::vector<Vec3d> points;
+        points.reserve(mesh_.number_of_vertices());
+        for (VertexIndex v : mesh_.vertices()) points.emplace_back(mesh_.point(v).x(), mesh_.point(v).y(), mesh_.point(v).z());
+        std::vector<std::array<std::uint32_t, 3>> triangles;
+        triangles.reserve(faces);
+        for (FaceIndex f : mesh_.faces()) {
+          const HalfedgeIndex h = mesh_.halfedge(f);
+          triangles.push_back({std::uint32_t(mesh_.source(h)), std::uint32_t(mesh_.target(h)), std::uint32_t(mesh_.target(mesh_.next(h)))});
+        }
+        const DecimateResult r = DecimateQuadric(points, triangles, std::min(target_faces, faces), settings_.decimate_max_error);
+        mesh_.clear();
+        mesh_.reserve(Mesh::size_type(points.size()), Mesh::size_type(triangles.size() * 3 / 2), Mesh::size_type(triangles.size()));
+        for (const Vec3d& p : points) mesh_.add_vertex(Point(p.x, p.y, p.z));
+        std::size_t refused = 0;  // none expected: the collapses keep the mesh manifold
+        for (const auto& t : triangles)
+          if (mesh_.add_face(VertexIndex(t[0]), VertexIndex(t[1]), VertexIndex(t[2])) == Mesh::null_face()) ++refused;
+        if (refused > 0) report_.warnings.push_back(fmt::format("decimation: {} faces could not be rebuilt (non-manifold)", refused));
+        return fmt::format("{} edges collapsed in {} passes: {} -> {} faces{}", r.collapses, r.passes, faces, mesh_.number_of_faces(),
+                           r.reached_target ? "" : " (stopped early: error bound or no valid collapse)");
+      }
       // The collapse counts edges: E = 3F/2 on a closed triangle mesh, so scale by the current ratio.
       const DecimationStop stop{std::size_t(double(edges) * double(std::min(target_faces, faces)) / double(faces)),
                                 settings_.decimate_max_error * settings_.decimate_max_error};
       SMS::GarlandHeckbert_plane_policies<Mesh, Kernel> policies(mesh_);
       const int collapsed = SMS::edge_collapse(mesh_, stop, params::get_cost(policies.get_cost()).get_placement(policies.get_placement()));
       mesh_.collect_garbage();
-      return fmt::format("{} edges collapsed: {} -> {} faces", collapsed, faces, mesh_.number_of_faces());
+      return fmt::format("{} edges collapsed (CGAL): {} -> {} faces", collapsed, faces, mesh_.number_of_faces());
     });
   }
 
@@ -440,9 +473,10 @@ CleanResult Clean(const io::TriMesh& input, const io::CleanupSettings& settings)
 
   if (settings.transfer_velocity && !input.velocities.empty() && !result.mesh.positions.empty()) {
     const auto t0 = std::chrono::steady_clock::now();
+    const double cpu0 = ProcessCpuSeconds();
     result.mesh.velocities = TransferVelocities(input, result.mesh.positions);
     report.operations.push_back({"velocity", std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(),
-                                 "from the nearest point of the input surface"});
+                                 ProcessCpuSeconds() - cpu0, "from the nearest point of the input surface"});
     report.velocities = true;
   }
 

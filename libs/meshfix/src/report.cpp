@@ -27,7 +27,7 @@ double RelativeChange(double before, double after) { return before != 0 ? (after
 
 nlohmann::json ToJson(const CleanReport& r) {
   nlohmann::json operations = nlohmann::json::array();
-  for (const auto& op : r.operations) operations.push_back({{"name", op.name}, {"seconds", op.seconds}, {"detail", op.detail}});
+  for (const auto& op : r.operations) operations.push_back({{"name", op.name}, {"seconds", op.seconds}, {"cpu_seconds", op.cpu_seconds}, {"detail", op.detail}});
   return {{"before", ToJson(r.before)},
           {"after", ToJson(r.after)},
           {"manifold", r.manifold()},

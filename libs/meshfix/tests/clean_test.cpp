@@ -1,10 +1,12 @@
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 
 #include "rime/core/error.h"
 #include "rime/io/scene.h"
 #include "rime/meshfix/clean.h"
+#include "rime/meshfix/decimate.h"
 #include "rime/meshfix/procedural.h"
 
 namespace rime::meshfix {
@@ -108,13 +110,26 @@ TEST(Clean, DecimationToHalfKeepsHausdorffDistanceSmall) {
   only_decimate.smooth = "none";
   only_decimate.self_intersections = "off";
   only_decimate.decimate_ratio = 0.5;
+  ASSERT_EQ(only_decimate.decimate_method, "batch");  // the default
   const CleanResult r = Clean(sphere, only_decimate);
   const double mean_edge = r.report.before.mean_edge_length;
   EXPECT_NEAR(double(r.mesh.triangle_count()), 0.5 * double(sphere.triangle_count()), 0.01 * double(sphere.triangle_count()));
   const double hausdorff = HausdorffDistance(sphere, r.mesh);
   EXPECT_LT(hausdorff, 0.25 * mean_edge) << "mean edge " << mean_edge;
   EXPECT_GT(hausdorff, 0.0);
-  std::printf("decimation to half: Hausdorff %.5f m = %.3f mean edges\n", hausdorff, hausdorff / mean_edge);
+  EXPECT_TRUE(r.report.closed());
+  EXPECT_TRUE(r.report.manifold());
+  EXPECT_NEAR(r.report.after.volume, r.report.before.volume, 1e-3 * r.report.before.volume);
+  std::printf("decimation to half (batch): Hausdorff %.5f m = %.3f mean edges\n", hausdorff, hausdorff / mean_edge);
+
+  // Against CGAL's edge_collapse with the same quadrics (strictly greedy): no worse than 1.5x.
+  io::CleanupSettings with_cgal = only_decimate;
+  with_cgal.decimate_method = "cgal";
+  const CleanResult c = Clean(sphere, with_cgal);
+  EXPECT_EQ(c.mesh.triangle_count(), r.mesh.triangle_count());
+  const double hausdorff_cgal = HausdorffDistance(sphere, c.mesh);
+  std::printf("decimation to half (cgal):  Hausdorff %.5f m = %.3f mean edges\n", hausdorff_cgal, hausdorff_cgal / mean_edge);
+  EXPECT_LT(hausdorff, 1.5 * hausdorff_cgal);
 
   // An error bound stops the collapse earlier: fewer faces removed, smaller distance.
   io::CleanupSettings bounded = only_decimate;
@@ -146,6 +161,95 @@ TEST(Clean, LinearVelocityFieldSurvivesRemeshing) {
   EXPECT_GT(r.report.target_edge, 0.0);
   // The remeshed mesh really has new vertices (not just the input ones).
   EXPECT_NE(r.mesh.positions.size(), sphere.positions.size());
+}
+
+/// V - E + F for a closed triangle mesh (E = 3F/2): 2 for a sphere, 0 for a torus.
+long long EulerCharacteristic(const io::TriMesh& m) {
+  const MeshStats s = ComputeStats(m);
+  return (long long)s.vertices - (long long)s.faces / 2;
+}
+
+io::TriMesh Decimated(const io::TriMesh& in, std::size_t target, double max_error, DecimateResult* result = nullptr) {
+  std::vector<Vec3d> points;
+  for (const Vec3f& p : in.positions) points.push_back(Vec3d(p));
+  io::TriMesh out;
+  out.triangles = in.triangles;
+  const DecimateResult r = DecimateQuadric(points, out.triangles, target, max_error);
+  if (result) *result = r;
+  for (const Vec3d& p : points) out.positions.push_back(Vec3f(p));
+  return out;
+}
+
+// The batched collapse keeps a closed manifold of the same genus, down to very few faces.
+TEST(Decimate, KeepsTopologyOfSphereAndTorus) {
+  const io::TriMesh torus = procedural::NoisyTorus(20000, 3);
+  const MeshStats in = ComputeStats(torus);
+  ASSERT_TRUE(in.closed() && in.manifold());
+  ASSERT_EQ(EulerCharacteristic(torus), 0);
+  DecimateResult r;
+  const io::TriMesh small = Decimated(torus, in.faces / 10, 0, &r);
+  const MeshStats out = ComputeStats(small);
+  EXPECT_TRUE(r.reached_target);
+  EXPECT_LE(out.faces, in.faces / 10);
+  EXPECT_GE(out.faces + 2, in.faces / 10);
+  EXPECT_TRUE(out.closed() && out.manifold());
+  EXPECT_EQ(out.components, 1u);
+  EXPECT_EQ(EulerCharacteristic(small), 0);
+  EXPECT_NEAR(out.volume, in.volume, 0.02 * in.volume);
+
+  // An icosahedron asked for 2 faces: collapses stop where one more would break the surface.
+  const io::TriMesh ico = procedural::Icosphere(1.0, 0);
+  const io::TriMesh tiny = Decimated(ico, 2, 0, &r);
+  EXPECT_FALSE(r.reached_target);
+  const MeshStats t = ComputeStats(tiny);
+  EXPECT_GE(t.faces, 4u);
+  EXPECT_TRUE(t.closed() && t.manifold());
+  EXPECT_EQ(EulerCharacteristic(tiny), 2);
+  EXPECT_GT(t.volume, 0);  // still outward
+}
+
+// Border vertices never move, so an open mesh keeps its border exactly.
+TEST(Decimate, KeepsBordersFixed) {
+  io::TriMesh open = procedural::Icosphere(1.0, 4);
+  procedural::PunchHole(open, {0, 0, 1}, 0.4);
+  const MeshStats in = ComputeStats(open);
+  ASSERT_GT(in.boundary_edges, 10u);
+  std::vector<Vec3f> border;
+  for (const auto& t : open.triangles)
+    for (int k = 0; k < 3; ++k) {
+      const std::uint32_t a = t[k], b = t[(k + 1) % 3];
+      bool twin = false;
+      for (const auto& u : open.triangles)
+        for (int j = 0; j < 3 && !twin; ++j) twin = u[j] == b && u[(j + 1) % 3] == a;
+      if (!twin) border.push_back(open.positions[a]);
+    }
+  const io::TriMesh out = Decimated(open, in.faces / 4, 0);
+  const MeshStats s = ComputeStats(out);
+  EXPECT_EQ(s.boundary_edges, in.boundary_edges);
+  EXPECT_TRUE(s.manifold());
+  EXPECT_LT(s.faces, in.faces / 2);
+  for (const Vec3f& p : border) EXPECT_NE(std::find(out.positions.begin(), out.positions.end(), p), out.positions.end());
+}
+
+// The error bound stops the collapse: every removed vertex stays within about max_error of the
+// surface (the quadric cost is a sum of squared plane distances, so it bounds each one).
+TEST(Decimate, ErrorBoundLimitsTheDistance) {
+  io::TriMesh sphere = procedural::Icosphere(1.0, 5);
+  procedural::AddRadialNoise(sphere, 0.002, 11);
+  const double bound = 0.004;  // twice the noise amplitude: removes most faces, not all
+  DecimateResult r;
+  const io::TriMesh out = Decimated(sphere, 0, bound, &r);
+  EXPECT_FALSE(r.reached_target);
+  EXPECT_LT(out.triangle_count(), sphere.triangle_count());
+  EXPECT_GT(out.triangle_count(), sphere.triangle_count() / 100);
+  EXPECT_LT(out.triangle_count(), sphere.triangle_count() / 2);
+  double largest = 0;
+  for (double d : DistancesTo(out, sphere.positions)) largest = std::max(largest, d);
+  // Plane distances bound the distance to the new surface only up to the triangles' curvature:
+  // allow a factor of 2 (measured: 0.43 x the bound).
+  EXPECT_LT(largest, 2 * bound);
+  std::printf("error bound %.4f m: %zu -> %zu faces, largest distance of an input vertex %.5f m\n", bound,
+              sphere.triangle_count(), out.triangle_count(), largest);
 }
 
 TEST(Clean, EveryOperationCanBeSwitchedOff) {

@@ -4,6 +4,7 @@
 #include <CLI/CLI.hpp>
 #include <fmt/format.h>
 
+#include <stdlib.h>
 #include <time.h>
 
 #include <algorithm>
@@ -36,6 +37,25 @@ double ProcessCpuSeconds() {
 double Seconds(std::chrono::steady_clock::time_point since) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count();
 }
+double LoadAverage() {
+  double load[1] = {-1};
+  return getloadavg(load, 1) == 1 ? load[0] : -1;
+}
+/// Largest and mean distance from the vertices and face centroids of `from` to the surface of
+/// `to` (TransferVelocities with velocity = position returns the nearest surface point).
+std::pair<double, double> DistanceTo(const io::TriMesh& from, const io::TriMesh& to) {
+  std::vector<Vec3f> samples = from.positions;
+  for (const auto& t : from.triangles) samples.push_back((from.positions[t[0]] + from.positions[t[1]] + from.positions[t[2]]) / 3.0f);
+  io::TriMesh surface = to;
+  surface.velocities = to.positions;
+  const std::vector<Vec3f> nearest = meshfix::TransferVelocities(surface, samples);
+  double largest = 0, sum = 0;
+  for (std::size_t i = 0; i < samples.size(); ++i) {
+    const double d = Norm(Vec3d(samples[i]) - Vec3d(nearest[i]));
+    largest = std::max(largest, d), sum += d;
+  }
+  return {largest, samples.empty() ? 0 : sum / double(samples.size())};
+}
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -44,7 +64,8 @@ int main(int argc, char** argv) {
   std::vector<std::string> shapes = {"ball", "torus"};
   int runs = 3, threads = 1;
   std::string json_path = "bench_clean.json", scratch = (fs::temp_directory_path() / "rime_bench_clean").string();
-  bool remesh = false, keep = false;
+  bool remesh = false, keep = false, hausdorff = false;
+  std::string decimate_method = io::CleanupSettings{}.decimate_method;
   app.add_option("--sizes", sizes, "Input triangle counts (approximate)");
   app.add_option("--shapes", shapes, "ball and/or torus")->check(CLI::IsMember({"ball", "torus"}));
   app.add_option("--runs", runs, "Runs per case (median reported)")->check(CLI::PositiveNumber);
@@ -53,15 +74,19 @@ int main(int argc, char** argv) {
   app.add_option("--scratch", scratch, "Folder for the read/write timing files");
   app.add_flag("--keep", keep, "Keep the generated input meshes in --scratch");
   app.add_flag("--remesh", remesh, "Also run one isotropic remeshing pass (not in the default chain)");
+  app.add_option("--decimate-method", decimate_method, "batch (default) or cgal")->check(CLI::IsMember({"batch", "cgal"}));
+  app.add_flag("--hausdorff", hausdorff, "Also measure the distance between input and output (untimed; slow)");
   CLI11_PARSE(app, argc, argv);
   exec::SetCpuThreads(threads);
   fs::create_directories(scratch);
 
   io::CleanupSettings settings;
   settings.remesh = remesh;
+  settings.decimate_method = decimate_method;
   nlohmann::json results = nlohmann::json::array();
-  fmt::print("rime-clean default chain, {} thread(s), median of {} run(s){}\n", threads, runs, remesh ? ", with remeshing" : "");
-  fmt::print("{:>6} {:>9} {:>9} {:>7} {:>7} {:>8} {:>8} {:>8} {:>12}  per operation (wall s)\n", "shape", "tris in", "tris out",
+  fmt::print("rime-clean default chain, {} thread(s), median of {} run(s), decimation {}{}\n", threads, runs, decimate_method,
+             remesh ? ", with remeshing" : "");
+  fmt::print("{:>6} {:>9} {:>9} {:>7} {:>7} {:>8} {:>8} {:>8} {:>12}  per operation (CPU s)\n", "shape", "tris in", "tris out",
              "read s", "write s", "clean s", "cpu s", "k tri/s", "k tri/cpu-s");
   for (const std::string& shape : shapes)
     for (std::size_t size : sizes) {
@@ -71,8 +96,10 @@ int main(int argc, char** argv) {
       const fs::path file = fs::path(scratch) / fmt::format("{}_{}.ply", shape, size);
       std::vector<double> read_s, write_s, clean_s, cpu_s, read_obj_s, write_obj_s;
       const fs::path obj_file = fs::path(file).replace_extension(".obj");
-      std::map<std::string, std::vector<double>> per_op;
+      std::map<std::string, std::vector<double>> per_op, per_op_cpu;
       meshfix::CleanReport last;
+      io::TriMesh last_mesh;
+      std::vector<double> load;
       for (int r = 0; r < runs; ++r) {
         auto t = std::chrono::steady_clock::now();
         io::WriteMesh(file, mesh);
@@ -92,8 +119,13 @@ int main(int argc, char** argv) {
         meshfix::CleanResult result = meshfix::Clean(read, settings);
         clean_s.push_back(Seconds(t));
         cpu_s.push_back(ProcessCpuSeconds() - cpu0);
-        for (const auto& op : result.report.operations) per_op[op.name].push_back(op.seconds);
+        for (const auto& op : result.report.operations) {
+          per_op[op.name].push_back(op.seconds);
+          per_op_cpu[op.name].push_back(op.cpu_seconds);
+        }
+        load.push_back(LoadAverage());
         last = std::move(result.report);
+        last_mesh = std::move(result.mesh);
       }
       if (!keep) fs::remove(file);
       const double clean = Median(clean_s);
@@ -101,15 +133,28 @@ int main(int argc, char** argv) {
       const double cpu = Median(cpu_s);
       const double rate_per_core_cpu = double(last.before.faces) / cpu;
       std::string ops;
-      nlohmann::json op_json;
+      nlohmann::json op_json, op_cpu_json;
       for (const auto& op : last.operations) {
-        const double m = Median(per_op[op.name]);
+        const double m = Median(per_op_cpu[op.name]);
         ops += fmt::format(" {} {:.2f}", op.name, m);
-        op_json[op.name] = m;
+        op_json[op.name] = Median(per_op[op.name]);
+        op_cpu_json[op.name] = m;
       }
       fmt::print("{:>6} {:>9} {:>9} {:>7.2f} {:>7.2f} {:>8.2f} {:>8.2f} {:>8.0f} {:>12.0f} {}\n", shape, last.before.faces,
                  last.after.faces, Median(read_s), Median(write_s), clean, cpu, rate / 1e3, rate_per_core_cpu / 1e3, ops);
       fmt::print("{:>6} {}\n", "", meshfix::SummaryLine(last));
+      nlohmann::json distance;
+      if (hausdorff) {
+        const auto [in_out, in_out_mean] = DistanceTo(mesh, last_mesh);
+        const auto [out_in, out_in_mean] = DistanceTo(last_mesh, mesh);
+        const double h = std::max(in_out, out_in);
+        distance = {{"hausdorff_m", h},
+                    {"hausdorff_mean_edges", h / last.before.mean_edge_length},
+                    {"mean_distance_m", 0.5 * (in_out_mean + out_in_mean)},
+                    {"mean_input_edge_m", last.before.mean_edge_length}};
+        fmt::print("{:>6} Hausdorff {:.3g} m = {:.4f} mean input edges, mean distance {:.3g} m\n", "", h,
+                   h / last.before.mean_edge_length, 0.5 * (in_out_mean + out_in_mean));
+      }
       fmt::print("{:>6} OBJ read {:.2f} s, write {:.2f} s; binary PLY read {:.2f} s, write {:.2f} s\n", "", Median(read_obj_s),
                  Median(write_obj_s), Median(read_s), Median(write_s));
       std::fflush(stdout);
@@ -128,9 +173,13 @@ int main(int argc, char** argv) {
                          {"clean_cpu_seconds", cpu},
                          {"input_triangles_per_cpu_second", rate_per_core_cpu},
                          {"operations_seconds", op_json},
+                         {"operations_cpu_seconds", op_cpu_json},
+                         {"load_average_1min", Median(load)},
+                         {"distance", distance},
                          {"report", meshfix::ToJson(last)}});
     }
-  WriteFileAtomically(json_path, nlohmann::json({{"benchmark", "rime-clean default chain"}, {"threads", threads}, {"remesh", remesh}, {"results", results}}).dump(2) + "\n");
+  WriteFileAtomically(json_path, nlohmann::json({{"benchmark", "rime-clean default chain"}, {"threads", threads}, {"remesh", remesh},
+                                                 {"decimate_method", decimate_method}, {"results", results}}).dump(2) + "\n");
   fmt::print("wrote {}\n", json_path);
   return 0;
 }

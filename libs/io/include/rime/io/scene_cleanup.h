@@ -46,7 +46,11 @@ struct CleanupSettings {
   // 6. Decimation (Garland-Heckbert plane quadrics, edge collapse). Target faces = decimate_faces
   // when > 0, else decimate_ratio x current faces; max_error > 0 also stops as soon as the
   // cheapest collapse would move the surface more than this (m, RMS plane distance).
+  // decimate_method "batch": rime's own collapse in sorted passes over flat arrays (about 10x
+  // faster than CGAL's, same Hausdorff distance; README "rime-clean"); "cgal": CGAL
+  // edge_collapse with GarlandHeckbert_plane_policies (strictly greedy, one priority queue).
   bool decimate = true;
+  std::string decimate_method = "batch";
   double decimate_ratio = 0.5;
   long long decimate_faces = 0;
   double decimate_max_error = 0;  // m

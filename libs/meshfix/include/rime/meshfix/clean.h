@@ -26,6 +26,7 @@ namespace rime::meshfix {
 struct OperationRecord {
   std::string name;   // "repair", "degenerate", "components", "holes", "remesh", "smooth", ...
   double seconds = 0;
+  double cpu_seconds = 0;  // CPU time of the whole process meanwhile (all threads): the fair cost on a shared machine
   std::string detail; // what it did, in words ("removed 12 components (340 faces)")
 };
 
