@@ -216,13 +216,21 @@ void WeldRepresentatives(const std::vector<Vec3f>& positions, Scratch<std::uint3
   exec::cpu::ParallelFor(Index(nv), [&](Index v) { rep[v] = table[rep[v]]; });  // slot -> its final minimum
 }
 
+// Points as separate x, y, z arrays, so that the distance loops below vectorise.
+struct Points {
+  Scratch<float> x, y, z;
+  explicit Points(std::size_t n) : x(n), y(n), z(n) {}
+  Vec3f operator[](std::size_t i) const { return Vec3f(x[i], y[i], z[i]); }
+  void Set(std::size_t i, const Vec3f& p) { x[i] = p.x, y[i] = p.y, z[i] = p.z; }
+};
+
 // The (up to 27) cells around one cell of a grid over the sorted particles, with each cell's lower
 // corner so that a particle can skip the cells farther from it than the radius.
 struct CellHood {
   std::uint32_t begin[27], end[27];
   Vec3f lo[27];
   int count = 0;
-  CellHood(const neighbors::GridView<float>& grid, const Vec3f* sorted, float size, std::uint32_t cell) {
+  CellHood(const neighbors::GridView<float>& grid, const Points& sorted, float size, std::uint32_t cell) {
     const neighbors::kernels::CellNeighborhood<float> hood(grid, grid, cell);
     count = hood.count;
     for (int k = 0; k < count; ++k) {
@@ -237,17 +245,23 @@ struct CellHood {
       if (begin[k] == grid.cell_start[cell]) std::swap(begin[0], begin[k]), std::swap(end[0], end[k]), std::swap(lo[0], lo[k]);
   }
   // Whether a point of points[begin[k], stop(k)) over the cells k, other than slot `self`, lies
-  // closer than sqrt(r2) to p (cells farther than that are skipped).
+  // closer than sqrt(r2) to p (cells farther than that are skipped; each range is counted
+  // branch-free, which vectorises).
   template <class Stop>
-  bool AnyWithin(const Vec3f* points, float size, const Vec3f& p, std::uint32_t self, float r2, Stop&& stop) const {
+  bool AnyWithin(const Points& points, float size, const Vec3f& p, std::uint32_t self, float r2, Stop&& stop) const {
     const float slack = 1e-4f * size;  // cell boxes from floor(): never skip a cell by round-off
+    const float *x = points.x.data(), *y = points.y.data(), *z = points.z.data();
     for (int k = 0; k < count; ++k) {
       const float gx = std::max(std::max(lo[k].x - p.x, p.x - lo[k].x - size) - slack, 0.0f);
       const float gy = std::max(std::max(lo[k].y - p.y, p.y - lo[k].y - size) - slack, 0.0f);
       const float gz = std::max(std::max(lo[k].z - p.z, p.z - lo[k].z - size) - slack, 0.0f);
       if (gx * gx + gy * gy + gz * gz >= r2) continue;
-      for (std::uint32_t t = begin[k], e = stop(k); t < e; ++t)
-        if (SquaredNorm(points[t] - p) < r2 && t != self) return true;
+      std::uint32_t hits = 0;
+      for (std::uint32_t t = begin[k], e = stop(k); t < e; ++t) {
+        const float dx = x[t] - p.x, dy = y[t] - p.y, dz = z[t] - p.z;
+        hits += (dx * dx + dy * dy + dz * dz < r2) & (t != self);
+      }
+      if (hits) return true;
     }
     return false;
   }
@@ -268,29 +282,29 @@ void ThinAndOrder(const Vec3f* positions, const Vec3f* normals, std::size_t tota
   const neighbors::GridView<float> view = grid.view();
   const std::uint32_t* order = grid.order();
   const std::size_t cells = grid.cell_count();
-  Scratch<Vec3f> sorted(total);
+  Points sorted(total);
   Scratch<std::uint8_t> kind(total), keep(total), undecided(total), cell_parity(cells);
   exec::cpu::ParallelFor(Index(total), [&](Index s) {
     const std::uint32_t i = order[s];
-    sorted[s] = positions[i];
+    sorted.Set(s, positions[i]);
     kind[s] = i < edge_base ? 0 : (i < face_base ? 1 : 2);
   });
   const float r2 = radius * radius;
   // keep = 1 for particles alone within the radius, 0 (undecided) for the others. The kept
   // particles of each cell are also packed at the cell's first slots of kept_at (kept_n of them,
   // stored at the cell's first slot), so that deciding a particle scans kept ones only.
-  Scratch<Vec3f> kept_at(total);
+  Points kept_at(total);
   Scratch<std::uint32_t> kept_n(total);
   exec::cpu::ParallelFor(Index(cells), [&](Index cell) {
     const std::uint32_t begin = view.cell_start[cell], end = view.cell_start[cell + 1];
-    const CellHood hood(view, sorted.data(), cell_size, std::uint32_t(cell));
+    const CellHood hood(view, sorted, cell_size, std::uint32_t(cell));
     std::uint32_t n_kept = 0;
     for (std::uint32_t s = begin; s < end; ++s) {
       // The next slots first: on a crowded surface they are usually close (same cell, input order).
       const bool near_next = (s > 0 && SquaredNorm(sorted[s - 1] - sorted[s]) < r2) || (s + 1 < total && SquaredNorm(sorted[s + 1] - sorted[s]) < r2);
-      undecided[s] = near_next || hood.AnyWithin(sorted.data(), cell_size, sorted[s], s, r2, [&](int k) { return hood.end[k]; });
+      undecided[s] = near_next || hood.AnyWithin(sorted, cell_size, sorted[s], s, r2, [&](int k) { return hood.end[k]; });
       keep[s] = !undecided[s];
-      if (keep[s]) kept_at[begin + n_kept++] = sorted[s];
+      if (keep[s]) kept_at.Set(begin + n_kept++, sorted[s]);
     }
     kept_n[begin] = n_kept;
     const Vec3f p = sorted[begin];
@@ -306,12 +320,12 @@ void ThinAndOrder(const Vec3f* positions, const Vec3f* normals, std::size_t tota
     for (const std::vector<std::uint32_t>& round : rounds)
       exec::cpu::ParallelFor(Index(round.size()), [&](Index r) {
         const std::uint32_t cell = round[r], begin = view.cell_start[cell];
-        const CellHood hood(view, sorted.data(), cell_size, cell);
+        const CellHood hood(view, sorted, cell_size, cell);
         const auto kept_end = [&](int k) { return hood.begin[k] + kept_n[hood.begin[k]]; };
         for (std::uint32_t s = begin; s < view.cell_start[cell + 1]; ++s) {
           if (!undecided[s] || kind[s] != cls) continue;
-          keep[s] = !hood.AnyWithin(kept_at.data(), cell_size, sorted[s], ~0u, r2, kept_end);
-          if (keep[s]) kept_at[begin + kept_n[begin]++] = sorted[s];
+          keep[s] = !hood.AnyWithin(kept_at, cell_size, sorted[s], ~0u, r2, kept_end);
+          if (keep[s]) kept_at.Set(begin + kept_n[begin]++, sorted[s]);
         }
       });
   Scratch<std::uint32_t> slot(total);

@@ -31,6 +31,14 @@ namespace fs = std::filesystem;
 using namespace rime;
 using Clock = std::chrono::steady_clock;
 
+// The 1-minute load average (other work on a shared machine), or -1 where /proc is absent.
+double LoadAverage() {
+  std::ifstream in("/proc/loadavg");
+  double load = -1;
+  in >> load;
+  return load;
+}
+
 double Seconds(Clock::time_point a, Clock::time_point b) { return std::chrono::duration<double>(b - a).count(); }
 
 double Median(std::vector<double> v) {
@@ -123,8 +131,9 @@ int main(int argc, char** argv) {
   cases.push_back({"torus 1M triangles, d_p 2 cm", [] { return boundary::MakeTorus(0.5, 0.15, 0.00243); }, 0.02});
   cases.push_back({"box 4x3x1.5 m tank, d_p 1 cm", [] { return boundary::MakeBox(Vec3d(4, 3, 1.5), true, 0.005); }, 0.01});
 
-  fmt::print("rime-boundary sampling + Akinci volumes, CPU, {} threads, median of {} runs (h = d_p, d_b = d_p/2)\n",
-             exec::CpuThreads(), repeats);
+  const double load_start = LoadAverage();
+  fmt::print("rime-boundary sampling + Akinci volumes, CPU, {} threads, median of {} runs (h = d_p, d_b = d_p/2), load average {:.2f}\n",
+             exec::CpuThreads(), repeats, load_start);
   fmt::print("| {:<28} | {:>9} | {:>9} | {:>8} | {:>8} | {:>8} | {:>8} | {:>9} | {:>10} |\n", "case", "triangles", "particles",
              "load s", "sample s", "volume s", "total s", "M part/s", "M/CPU-s");
   fmt::print("|{:-<30}|{:->11}|{:->11}|{:->10}|{:->10}|{:->10}|{:->10}|{:->11}|{:->12}|\n", "", "", "", "", "", "", "", "", "");
@@ -133,7 +142,10 @@ int main(int argc, char** argv) {
     if (c.name.find(only) != std::string::npos) results.push_back(RunCase(c, repeats));
   fmt::print("(load = mesh file import or procedural tessellation, not included in M part/s; M/CPU-s = particles per\n"
              " second of process CPU time over all threads, which stays meaningful on a machine shared with other work)\n");
+  const double load_end = LoadAverage();
+  fmt::print("load average at the end: {:.2f}\n", load_end);
   std::ofstream(json_path) << nlohmann::json{{"benchmark", "boundary"}, {"threads", exec::CpuThreads()}, {"repeats", repeats},
+                                             {"load_average_start", load_start}, {"load_average_end", load_end},
                                              {"results", results}}
                                   .dump(2)
                            << "\n";
