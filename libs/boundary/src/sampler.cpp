@@ -11,6 +11,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdlib>
+#include <ctime>
 #include <limits>
 #include <memory>
 #include <numeric>
@@ -191,7 +192,8 @@ void WeldRepresentatives(const std::vector<Vec3f>& positions, Scratch<std::uint3
     return std::array<std::uint32_t, 3>{std::bit_cast<std::uint32_t>(p.x + 0.0f), std::bit_cast<std::uint32_t>(p.y + 0.0f),
                                          std::bit_cast<std::uint32_t>(p.z + 0.0f)};
   };
-  const std::uint32_t size = std::bit_ceil(static_cast<std::uint32_t>(2 * nv + 16)), mask = size - 1;
+  // Load factor 0.375 to 0.75: short probe sequences and a table of at most 8 bytes per vertex.
+  const std::uint32_t size = std::bit_ceil(static_cast<std::uint32_t>(nv + nv / 3 + 16)), mask = size - 1;
   Scratch<std::uint32_t> table(size);
   exec::cpu::ParallelFor(Index(size), [&](Index i) { table[i] = kEmpty; });
   exec::cpu::ParallelFor(Index(nv), [&](Index i) {
@@ -290,32 +292,40 @@ void ThinAndOrder(const Vec3f* positions, const Vec3f* normals, std::size_t tota
     kind[s] = i < edge_base ? 0 : (i < face_base ? 1 : 2);
   });
   const float r2 = radius * radius;
-  // keep = 1 for particles alone within the radius, 0 (undecided) for the others. The kept
-  // particles of each cell are also packed at the cell's first slots of kept_at (kept_n of them,
-  // stored at the cell's first slot), so that deciding a particle scans kept ones only.
-  Points kept_at(total);
-  Scratch<std::uint32_t> kept_n(total);
+  // keep = 1 for particles alone within the radius, 0 (undecided) for the others.
   exec::cpu::ParallelFor(Index(cells), [&](Index cell) {
     const std::uint32_t begin = view.cell_start[cell], end = view.cell_start[cell + 1];
     const CellHood hood(view, sorted, cell_size, std::uint32_t(cell));
-    std::uint32_t n_kept = 0;
+    bool crowded = false;
     for (std::uint32_t s = begin; s < end; ++s) {
       // The next slots first: on a crowded surface they are usually close (same cell, input order).
       const bool near_next = (s > 0 && SquaredNorm(sorted[s - 1] - sorted[s]) < r2) || (s + 1 < total && SquaredNorm(sorted[s + 1] - sorted[s]) < r2);
       undecided[s] = near_next || hood.AnyWithin(sorted, cell_size, sorted[s], s, r2, [&](int k) { return hood.end[k]; });
       keep[s] = !undecided[s];
-      if (keep[s]) kept_at.Set(begin + n_kept++, sorted[s]);
+      crowded = crowded || undecided[s];
     }
-    kept_n[begin] = n_kept;
     const Vec3f p = sorted[begin];
-    cell_parity[cell] = n_kept == end - begin
-                            ? 8
-                            : std::uint8_t((view.CellCoord(p.x, view.origin.x) & 1) | (view.CellCoord(p.y, view.origin.y) & 1) << 1 |
-                                           (view.CellCoord(p.z, view.origin.z) & 1) << 2);
+    cell_parity[cell] = !crowded ? 8
+                                 : std::uint8_t((view.CellCoord(p.x, view.origin.x) & 1) | (view.CellCoord(p.y, view.origin.y) & 1) << 1 |
+                                                (view.CellCoord(p.z, view.origin.z) & 1) << 2);
   });
   std::vector<std::uint32_t> rounds[8];  // crowded cells by parity, in cell order
+  std::size_t crowded_cells = 0;
   for (std::uint32_t cell = 0; cell < cells; ++cell)
-    if (cell_parity[cell] < 8) rounds[cell_parity[cell]].push_back(cell);
+    if (cell_parity[cell] < 8) rounds[cell_parity[cell]].push_back(cell), ++crowded_cells;
+  // Where there is anything to decide: the kept particles of each cell packed at the cell's first
+  // slots of kept_at (kept_n of them, stored at the cell's first slot), so that deciding a
+  // particle scans kept ones only.
+  Points kept_at(crowded_cells ? total : 0);
+  Scratch<std::uint32_t> kept_n(crowded_cells ? total : 0);
+  if (crowded_cells)
+    exec::cpu::ParallelFor(Index(cells), [&](Index cell) {
+      const std::uint32_t begin = view.cell_start[cell];
+      std::uint32_t n_kept = 0;
+      for (std::uint32_t s = begin; s < view.cell_start[cell + 1]; ++s)
+        if (keep[s]) kept_at.Set(begin + n_kept++, sorted[s]);
+      kept_n[begin] = n_kept;
+    });
   for (std::uint8_t cls = 0; cls < 3; ++cls)
     for (const std::vector<std::uint32_t>& round : rounds)
       exec::cpu::ParallelFor(Index(round.size()), [&](Index r) {
@@ -360,11 +370,16 @@ double EstimateSampleCount(const io::TriMesh& mesh, double spacing) {
 }
 
 SurfaceSamples SampleSurface(const io::TriMesh& mesh, const SampleOptions& options) {
+  // Per-phase timings for --verbose: wall and process CPU time (all threads; the CPU figure stays
+  // meaningful on a machine shared with other work).
   auto phase_start = std::chrono::steady_clock::now();
-  const auto phase = [&](const char* name) {  // per-phase timings for --verbose
+  std::clock_t phase_cpu = std::clock();
+  const auto phase = [&](const char* name) {
     const auto now = std::chrono::steady_clock::now();
-    log::Debug("sampling {}: {:.1f} ms", name, 1e3 * std::chrono::duration<double>(now - phase_start).count());
-    phase_start = now;
+    const std::clock_t cpu = std::clock();
+    log::Debug("sampling {}: {:.1f} ms, {:.1f} ms CPU", name, 1e3 * std::chrono::duration<double>(now - phase_start).count(),
+               1e3 * double(cpu - phase_cpu) / CLOCKS_PER_SEC);
+    phase_start = now, phase_cpu = cpu;
   };
   CheckInput(mesh, options);
   CheckCount(EstimateSampleCount(mesh, options.spacing), options);
