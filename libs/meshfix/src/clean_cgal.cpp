@@ -1,5 +1,5 @@
-// The cleanup chain (see rime/meshfix/clean.h). Every CGAL call of rime-clean except the AABB
-// velocity transfer is in this one translation unit: CGAL headers take minutes to compile.
+// The cleanup chain (see rime/meshfix/clean.h). Every CGAL call of rime-clean is in this one
+// translation unit: CGAL headers take minutes to compile.
 //
 // Costs measured with CGAL 5.5.1 on a closed 438k-triangle mesh, one thread (LIBRARY_NOTES.md):
 // soup repair on load 2.2 s, isotropic remeshing 3.9 s per pass, angle smoothing 2.1 s, tangential

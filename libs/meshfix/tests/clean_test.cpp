@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
+#include <random>
 
 #include "rime/core/error.h"
 #include "rime/io/scene.h"
@@ -59,6 +61,46 @@ TEST(Clean, TransferVelocitiesIsExactAtInputVerticesAndLinearInside) {
   EXPECT_NEAR(v.x, expected.x, 1e-5);
   EXPECT_NEAR(v.y, expected.y, 1e-5);
   EXPECT_NEAR(v.z, expected.z, 1e-5);
+}
+
+/// Squared distance from p to triangle abc, written independently of TransferVelocities: the
+/// projection on the plane when it falls inside, else the nearest of the three edges.
+double BruteDistance2(const Vec3d& p, const Vec3d& a, const Vec3d& b, const Vec3d& c) {
+  auto segment = [&](const Vec3d& s, const Vec3d& e) {
+    const Vec3d d = e - s;
+    const double t = SquaredNorm(d) > 0 ? std::clamp(Dot(p - s, d) / SquaredNorm(d), 0.0, 1.0) : 0.0;
+    return SquaredNorm(s + d * t - p);
+  };
+  double best = std::min({segment(a, b), segment(b, c), segment(c, a)});
+  const Vec3d n = Cross(b - a, c - a);
+  if (SquaredNorm(n) > 0) {
+    const Vec3d x = p - n * (Dot(p - a, n) / SquaredNorm(n));
+    const bool inside = Dot(Cross(b - a, x - a), n) >= 0 && Dot(Cross(c - b, x - b), n) >= 0 && Dot(Cross(a - c, x - c), n) >= 0;
+    if (inside) best = std::min(best, SquaredNorm(x - p));
+  }
+  return best;
+}
+
+// The tree search returns the closest surface point: same distance as a scan of every triangle,
+// for points near the surface (the transfer's use) and far from it.
+TEST(Clean, TransferVelocitiesFindsTheClosestPointOfABruteForceScan) {
+  io::TriMesh sphere = procedural::Icosphere(1.0, 3);
+  procedural::AddRadialNoise(sphere, 0.05, 5);
+  sphere.velocities = sphere.positions;  // the transferred "velocity" is the closest point itself
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<float> box(-1.6f, 1.6f), jitter(-0.02f, 0.02f);
+  std::vector<Vec3f> queries;
+  for (int i = 0; i < 500; ++i) queries.push_back(Vec3f(box(rng), box(rng), box(rng)));
+  for (std::size_t v = 0; v < sphere.positions.size(); v += 3)
+    queries.push_back(sphere.positions[v] + Vec3f(jitter(rng), jitter(rng), jitter(rng)));
+  const std::vector<Vec3f> closest = TransferVelocities(sphere, queries);
+  for (std::size_t i = 0; i < queries.size(); ++i) {
+    const Vec3d q(queries[i]);
+    double brute = std::numeric_limits<double>::infinity();
+    for (const auto& t : sphere.triangles)
+      brute = std::min(brute, BruteDistance2(q, Vec3d(sphere.positions[t[0]]), Vec3d(sphere.positions[t[1]]), Vec3d(sphere.positions[t[2]])));
+    EXPECT_NEAR(Norm(Vec3d(closest[i]) - q), std::sqrt(brute), 1e-5) << i;
+  }
 }
 
 // Acceptance: a noisy sphere with specks and a hole comes out as one closed manifold component
