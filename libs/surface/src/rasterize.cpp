@@ -18,6 +18,9 @@
 #include <tbb/parallel_sort.h>
 
 #include <fmt/format.h>
+#ifdef __GLIBC__
+#include <malloc.h>
+#endif
 
 #include <algorithm>
 #include <chrono>
@@ -578,6 +581,9 @@ Result Reconstruct(const ParticleSet& particles, const Settings& settings) {
   log::Debug("rasterize {} particles: plan {:.3f} s ({} leaves), field {:.3f} s, voids {:.3f} s ({} voxels), band+prune {:.3f} s",
              particles.size(), t_plan, planned_leaves, t_raster - t_plan, t_voids - t_raster, stats.filled_void_voxels,
              Seconds(t0) - t_voids);
+#ifdef __GLIBC__
+  malloc_trim(0);  // hand freed particle arrays and mask leaves back before the mesh is built
+#endif
   auto& grid = result.grids->surface;
   grid->setTree(raster.surface);
   stats.seconds_rasterize = Seconds(t0);

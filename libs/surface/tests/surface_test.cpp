@@ -1,6 +1,7 @@
 // Reconstruction acceptance tests (issue 7; spec §10, T26–T27): radius and closedness of a ball,
 // thin sheets, separated clusters, level-set validity and the VDB file contract.
 #include <gtest/gtest.h>
+#include <openvdb/tools/VolumeToMesh.h>
 #include <unistd.h>
 
 #include <cmath>
@@ -12,6 +13,7 @@
 
 #include "rime/core/error.h"
 #include "rime/surface/reconstruct.h"
+#include "../src/grids.h"
 
 namespace rime::surface {
 namespace {
@@ -232,6 +234,35 @@ TEST(Reconstruct, SeparatedClustersGiveTwoComponents) {
     const Result result = Reconstruct(a, settings);  // no stored anisotropy: PCA of the cloud
     EXPECT_EQ(Analyze(result.mesh).components, 2u) << FieldName(field);
     ExpectClosedOutward(result.mesh, FieldName(field));
+  }
+}
+
+// The mesh is built in slabs welded at their cuts: it must be OpenVDB's one-piece mesh, polygon for
+// polygon and vertex for vertex, with slabs of any size (here 1 to 64 leaves: several cuts).
+TEST(Reconstruct, SlabMeshEqualsOneMesh) {
+  ParticleSet ball = Ball(12 * kSpacing, Vec3d(0.003, -0.002, 0.001));
+  Settings settings;
+  settings.field = Field::kIsotropic;
+  settings.mesh = false;
+  const Result result = Reconstruct(ball, settings);
+  const openvdb::FloatGrid& grid = *result.grids->surface;
+  std::vector<openvdb::Vec3s> points;
+  std::vector<openvdb::Vec3I> triangles;
+  std::vector<openvdb::Vec4I> quads;
+  openvdb::tools::volumeToMesh(grid, points, triangles, quads, 0.0, 0.0);
+  std::vector<std::array<float, 3>> expected;
+  for (const auto& p : points) expected.push_back({p.x(), p.y(), p.z()});
+  std::sort(expected.begin(), expected.end());
+  for (std::size_t slab_leaves : {std::size_t(1), std::size_t(64), std::size_t(1) << 20}) {
+    io::TriMesh mesh;
+    ExtractMesh(grid, true, mesh, slab_leaves);
+    ExpectClosedOutward(mesh, "slabs of " + std::to_string(slab_leaves));
+    EXPECT_EQ(mesh.triangle_count(), triangles.size() + 2 * quads.size()) << slab_leaves;
+    EXPECT_EQ(mesh.vertex_count(), points.size()) << slab_leaves;
+    std::vector<std::array<float, 3>> got;
+    for (const auto& p : mesh.positions) got.push_back({p.x, p.y, p.z});
+    std::sort(got.begin(), got.end());
+    EXPECT_TRUE(got == expected) << "same vertex positions, slabs of " << slab_leaves;
   }
 }
 

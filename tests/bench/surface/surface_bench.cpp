@@ -9,6 +9,9 @@
 #include <openvdb/tools/ParticlesToLevelSet.h>
 #include <openvdb/tools/VolumeToMesh.h>
 #include <sys/resource.h>
+#ifdef __GLIBC__
+#include <malloc.h>
+#endif
 #include <sys/wait.h>
 #include <tbb/global_control.h>
 #include <tbb/info.h>
@@ -189,9 +192,12 @@ int main(int argc, char** argv) {
   nlohmann::json results = nlohmann::json::array();
   std::printf("threads: %d, voxel = spacing/2, shape: %s, median of %d runs (by wall time); M/cpu-s = particles per CPU-second (user+sys, robust to a shared machine)\n", threads, sheet ? "jittered two-layer ice sheet" : "jittered ice ball", runs);
   std::printf("%-24s %10s %9s %9s %9s %9s %10s %12s %11s %10s\n", "method", "particles", "wall s", "field s", "mesh s", "cpu s",
-              "M part/s", "M/cpu-s", "triangles", "peak MB");
+              "M part/s", "M/cpu-s", "triangles", "peak MB");  // MB = 1e6 bytes
   for (std::size_t n : sizes) {
     const surface::ParticleSet set = IceShape(n, sheet);
+#ifdef __GLIBC__
+    malloc_trim(0);  // the generator's freed arrays would otherwise count in every child's peak
+#endif
     for (int method = 0; method < (openvdb_baseline ? 2 : 1); ++method) {
       std::vector<Measure> measures;
       std::uint64_t peak = 0;
@@ -208,10 +214,12 @@ int main(int argc, char** argv) {
       std::sort(measures.begin(), measures.end(), [](const Measure& a, const Measure& b) { return a.seconds < b.seconds; });
       const Measure& m = measures[measures.size() / 2];
       const char* name = method == 0 ? "rime ellipsoids (aniso)" : "openvdb P2LS (iso)";
+      double load[1] = {0};
+      (void)!getloadavg(load, 1);  // after the runs: the others' share of this machine
       const double rate = double(set.size()) / m.seconds / 1e6;
       const double cpu_rate = double(set.size()) / m.cpu_seconds / 1e6;
-      std::printf("%-24s %10zu %9.3f %9.3f %9.3f %9.3f %10.3f %12.3f %11llu %10.0f\n", name, set.size(), m.seconds, m.rasterize,
-                  m.mesh, m.cpu_seconds, rate, cpu_rate, (unsigned long long)m.triangles, peak / 1e6);
+      std::printf("%-24s %10zu %9.3f %9.3f %9.3f %9.3f %10.3f %12.3f %11llu %10.0f  load %.1f\n", name, set.size(), m.seconds,
+                  m.rasterize, m.mesh, m.cpu_seconds, rate, cpu_rate, (unsigned long long)m.triangles, peak / 1e6, load[0]);
       std::fflush(stdout);
       results.push_back({{"method", name},
                          {"particles", set.size()},
@@ -227,6 +235,7 @@ int main(int argc, char** argv) {
                          {"active_voxels", m.active_voxels},
                          {"peak_memory_bytes", peak},
                          {"shape", sheet ? "two-layer sheet" : "ball"},
+                         {"load_average_1min", load[0]},
                          {"note", "peak memory includes the generated particle set (~100 bytes/particle)"}});
     }
   }
