@@ -389,7 +389,7 @@ class Chain {
         for (const auto& t : triangles)
           if (mesh_.add_face(VertexIndex(t[0]), VertexIndex(t[1]), VertexIndex(t[2])) == Mesh::null_face()) ++refused;
         if (refused > 0) report_.warnings.push_back(fmt::format("decimation: {} faces could not be rebuilt (non-manifold)", refused));
-        return fmt::format("{} edges collapsed in {} passes: {} -> {} faces{}", r.collapses, r.passes, faces, mesh_.number_of_faces(),
+        return fmt::format("{} edge collapses in {} passes: {} -> {} faces{}", r.collapses, r.passes, faces, mesh_.number_of_faces(),
                            r.reached_target ? "" : " (stopped early: error bound or no valid collapse)");
       }
       // The collapse counts edges: E = 3F/2 on a closed triangle mesh, so scale by the current ratio.
@@ -398,7 +398,8 @@ class Chain {
       SMS::GarlandHeckbert_plane_policies<Mesh, Kernel> policies(mesh_);
       const int collapsed = SMS::edge_collapse(mesh_, stop, params::get_cost(policies.get_cost()).get_placement(policies.get_placement()));
       mesh_.collect_garbage();
-      return fmt::format("{} edges collapsed (CGAL): {} -> {} faces", collapsed, faces, mesh_.number_of_faces());
+      // CGAL 5.5 returns the edges removed: three per collapse on a closed mesh.
+      return fmt::format("{} edges removed by CGAL edge_collapse: {} -> {} faces", collapsed, faces, mesh_.number_of_faces());
     });
   }
 
