@@ -2,10 +2,6 @@
 // bounded density error, no particle through a wall) or in a clear refusal (rime::Error of the
 // documented kind, naming the cause). The empty scene, a single particle and coincident particles
 // are covered in tests/validation/free_fall_test.cpp.
-//
-// Cases that expose a solver bug are written as the test that must pass once it is fixed, and are
-// skipped with "known failure: <cause and fix>" so the suite stays green meanwhile;
-// RIME_RUN_KNOWN_FAILURES=1 runs them (today they fail).
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -23,8 +19,6 @@
 #include "rime/sph/simulation.h"
 #include "../../libs/sph/tests/test_scenes.h"
 
-#define RIME_KNOWN_FAILURE(why) \
-  if (!std::getenv("RIME_RUN_KNOWN_FAILURES")) GTEST_SKIP() << "known failure: " << why
 
 namespace rime {
 namespace {
@@ -204,11 +198,6 @@ TEST(ExtremesFixedStep, AtTheCflLimitTheWaterStaysOnThePlate) {
 // λ = 1: particles cross one spacing per step. Either the run stays on the near side or it stops
 // with the divergence diagnosis.
 TEST(ExtremesFixedStep, BeyondTheCflLimitIsStableOrDiagnosed) {
-  RIME_KNOWN_FAILURE(
-      "at fixed lambda = v dt / d_p from 0.8 to 1.9 the water passes through the plate (1568 particle-steps below its top at "
-      "lambda 1, down to 0.54 m under it) and nothing is reported: Simulation::CheckDivergence stops only above 2 spacings per "
-      "step, but single-layer walls leak from lambda 0.8 (0.7 holds). Fix: stop at max_speed*dt/d_p > 0.75 there (and say so in "
-      "its message); CFL-adaptive runs at cfl 0.4 peak at 0.57 on this 50 m/s impact");
   const double speed = 50;
   const PlateRun r = RunPlate(FixedStepPlateScene(speed, 1.0), speed);
   std::printf("fixed dt at lambda 1, 50 m/s: %s; %d particle-steps through the plate, lowest %.3g m; %s\n", Describe(r.s).c_str(),
@@ -224,10 +213,6 @@ TEST(ExtremesFixedStep, BeyondTheCflLimitIsStableOrDiagnosed) {
 // The scene accepts cfl up to 2 for the adaptive rule: a value beyond the stable limit must be
 // refused by the scene reader, diagnosed, or stable.
 TEST(ExtremesAdaptiveStep, CflOfOneIsRefusedDiagnosedOrStable) {
-  RIME_KNOWN_FAILURE(
-      "[simulation] cfl = 1 (the scene reader accepts (0, 2]) lets the 50 m/s impact pass through the plate (1092 particle-steps, "
-      "0.56 m under it) with no diagnosis; cfl 0.7 holds, 0.8 leaks. Fix: bound cfl to (0, 0.7] in libs/io/src/scene.cpp, and the "
-      "CheckDivergence threshold of ExtremesFixedStep.BeyondTheCflLimitIsStableOrDiagnosed");
   io::Scene scene = PlateScene(50);
   try {
     scene.solver.cfl = io::ParseScene("[simulation]\ncfl = 1.0\n", "cfl.toml").solver.cfl;
@@ -309,8 +294,15 @@ struct DamRun {
 };
 
 DamRun RunDam(const Dam& dam, const io::Scene& base, double t_end) {
-  auto sim = dam.Make<float>(base);
   DamRun r;
+  std::unique_ptr<sph::Simulation<float>> sim;
+  try {
+    sim = dam.Make<float>(base);
+  } catch (const Error& e) {  // refused before the first step
+    r.s.error = e;
+    r.finite = true;
+    return r;
+  }
   r.energy_start = Energy(*sim);
   const std::int64_t n = sim->fluid_count();
   auto centroid_x = [&] {
@@ -354,11 +346,6 @@ INSTANTIATE_TEST_SUITE_P(Spacings, ExtremesSpacing, ::testing::Values(0.0005, 0.
                          [](const auto& info) { return info.param < 0.01 ? std::string("HalfMillimetre") : std::string("TenCentimetres"); });
 
 TEST(ExtremesSpacing, HalfMillimetreWithSurfaceTensionIsStableOrRefusedNamingIt) {
-  RIME_KNOWN_FAILURE(
-      "d_p = 0.5 mm with the default kappa = 0.02 stops at step 0 with 'particles move 2.79 spacings per step: the time step "
-      "is too large' although the solver chose that step (0.5 ms, the viscous limit); stable with dt_max = 3e-5, not with 1e-4. "
-      "Simulation::NextTimeStep has no surface-tension limit: add dt <= 0.25 sqrt(rho0 h^4 / max(kappa, kappa_boundary)) "
-      "(1.4e-5 s here; a = kappa/(rho0 h^3) is the He 2014 acceleration scale)");
   const Dam dam{0.0005};
   io::Scene base;
   base.modules = {"gravity", "viscosity", "surface_tension"};
@@ -408,10 +395,6 @@ TEST(ExtremesViscosity, VeryHighWallStickinessIsStable) {
 }
 
 TEST(ExtremesViscosity, VeryHighMorrisViscosityIsStable) {
-  RIME_KNOWN_FAILURE(
-      "mu = 100 Pa s diverges at step 4 ('CFL number above 2: the time step is too large', energy grows) with the solver's own "
-      "CFL step (6 ms); stable at dt <= 1 ms. Simulation::NextTimeStep limits dt for beta0*beta1 only: add the explicit Morris "
-      "limit dt <= 0.1 h^2 rho0 / mu");
   const DamRun r = RunDam(Dam{0.02}, WithViscosity(100, 0.1, 1), 0.2);
   std::printf("viscosity mu 100: %s; energy %.4g -> %.4g J/kg\n", Describe(r.s).c_str(), r.energy_start, r.energy_end);
   ExpectStableDam(r);
@@ -420,10 +403,6 @@ TEST(ExtremesViscosity, VeryHighMorrisViscosityIsStable) {
 // β0 = 1000: the viscous limit (2 µs) is below dt_min (10 µs). Stable (with a smaller step) or
 // refused naming the viscosity, never clamped to an unstable step.
 TEST(ExtremesViscosity, StickinessBeyondTheMinimumStepIsRefusedNamingIt) {
-  RIME_KNOWN_FAILURE(
-      "beta0 = 1000 needs dt <= 2e-6 s; Simulation::NextTimeStep clamps it up to dt_min = 1e-5 and the run explodes "
-      "(5338 m/s at step 6; the message advises reducing dt_max or cfl, which cannot help). Fix: when a stability limit is below "
-      "dt_min, throw InputError naming viscosity.beta0 and simulation.dt_min (once, e.g. in Initialize)");
   const DamRun r = RunDam(Dam{0.02}, WithViscosity(1e-3, 1000, 1), 0.05);
   std::printf("viscosity beta0 1000: %s; %s\n", Describe(r.s).c_str(), r.s.error ? r.s.error->what() : "no error");
   if (r.s.error) {
@@ -448,11 +427,6 @@ TEST(ExtremesSurfaceTension, HighIsStable) {
 }
 
 TEST(ExtremesSurfaceTension, VeryHighIsStableOrRefused) {
-  RIME_KNOWN_FAILURE(
-      "kappa = kappa_boundary = 100 N: 22 particles pass through the walls (up to 7 d_p out, from t = 0.014 s) and a particle "
-      "reaches 45% compression, with no diagnosis; stable over 0.5 s at dt_max = 5e-4 and 2e-4. Same root cause as the 0.5 mm "
-      "case: add dt <= 0.25 sqrt(rho0 h^4 / max(kappa, kappa_boundary)) (3.2e-4 s here) to Simulation::NextTimeStep; a force "
-      "criterion on the measured accelerations, 0.25 sqrt(h / max|a|), still leaked");
   const DamRun r = RunDam(Dam{0.02}, WithSurfaceTension(100), 0.5);
   std::printf("surface tension 100: %s; %d particle-steps beyond a wall; %s\n", Describe(r.s).c_str(), r.outside,
               r.s.error ? r.s.error->what() : "no error");
@@ -523,12 +497,6 @@ TEST(ExtremesFarFromOrigin, DoubleMatchesTheSceneAtTheOrigin) {
 // only the output rounding, ≤ 0.025 d_p, separates the runs) or it refuses the scene naming the
 // precision.
 TEST(ExtremesFarFromOrigin, FloatMatchesTheSceneAtTheOriginOrIsRefused) {
-  RIME_KNOWN_FAILURE(
-      "float at 10 km runs silently with positions quantised to 1 mm (0.05 d_p): after 0.3 s the dam break differs from the same "
-      "scene at the origin by 0.4 d_p rms (1.7 d_p max), while float and double agree to 6e-6 d_p rms at the origin. Fix in "
-      "Simulation: subtract a double origin (the lattice-aligned centre of the initial domain) from boundary, water, emitter, "
-      "domain and motion positions on input and add it back in Positions/BoundaryPositions/Snapshot (positions written as "
-      "float64 when it is non-zero); refuse float when the scene's half extent exceeds ~2^23 * 1e-3 d_p");
   std::optional<Error> error;
   const auto here = DamState<float>(0, &error);
   ASSERT_FALSE(error.has_value()) << error->what();
@@ -646,11 +614,6 @@ TEST(ExtremesInsideSolid, BlockAgainstTheWallsIsRefused) {
 }
 
 TEST(ExtremesInsideSolid, BlockFillingALargeSolidIsRemovedOrRefused) {
-  RIME_KNOWN_FAILURE(
-      "a block filling a closed 30 cm cube keeps 1728 of its 4096 particles inside the solid (only the 2368 within 1.05 d_p of the "
-      "walls are dropped) and simulates them there. Simulation::Initialize tests proximity, not inside/outside: keep the "
-      "boundary normals (AddBoundaryObject ignores normal_0..2) and drop candidates whose nearest boundary particle b has "
-      "(x - x_b).n_b < 0, counting them in the log line and the refusal");
   InsideCube cube(0.3);
   cube.AddFillingBlock();
   auto sim = cube.Make();
@@ -668,10 +631,6 @@ TEST(ExtremesInsideSolid, BlockFillingALargeSolidIsRemovedOrRefused) {
 }
 
 TEST(ExtremesInsideSolid, EmitterInsideASolidIsRefusedOrItsWaterRemoved) {
-  RIME_KNOWN_FAILURE(
-      "an emitter whose nozzle lies inside a closed cube emits every particle into the solid (210 after 0.3 s, all inside). "
-      "Simulation::Emit checks nothing: apply the same inside/near-solid filter to each emitted layer (count the drops in "
-      "StepStats), or refuse in Initialize a nozzle whose centre lies inside a solid");
   InsideCube cube(0.3);
   io::Emitter e;
   e.center = {0, 0, 0.5};

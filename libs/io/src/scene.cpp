@@ -111,6 +111,15 @@ void ApplyQualityPreset(const std::string& quality, Scene& scene) {
   }
 }
 
+// The Im et al. 2013 baseline (issue 10): isotropic ice growth, Akinci 2013 surface tension
+// instead of He 2014, no wall stickiness. Like the quality presets, explicit values still win.
+void ApplyMethodPreset(const std::string& method, Scene& scene) {
+  if (method != "im2013") return;
+  scene.freezing.growth = "isotropic";
+  scene.surface_tension.model = "akinci2013";
+  scene.viscosity.wall_beta0 = 0;
+}
+
 }  // namespace
 
 const std::vector<std::string>& KnownModules() {
@@ -145,9 +154,11 @@ Scene ParseScene(const std::string& text, const fs::path& file) {
     scene.info.fps = t.Number("fps", scene.info.fps, {0, 10000, true, false});
     scene.info.end_time = t.Number("end_time", scene.info.end_time, Range::Positive());
     scene.info.quality = t.String("quality", "", {"preview", "production", "reference"});
+    scene.info.method = t.String("method", scene.info.method, {"rime", "im2013"});
     t.RejectUnknownKeys();
   }
   ApplyQualityPreset(scene.info.quality, scene);
+  ApplyMethodPreset(scene.info.method, scene);
   {
     TomlReader t = top.Table("water");
     FluidSettings& f = scene.fluid;
@@ -164,7 +175,7 @@ Scene ParseScene(const std::string& text, const fs::path& file) {
     scene.modules = {modules.begin(), modules.end()};
     s.time_step = t.String("time_step", s.time_step, {"cfl", "fixed"});
     s.dt = t.Number("dt", s.dt, {0, 1, true, false});
-    s.cfl = t.Number("cfl", s.cfl, {0, 2, true, false});
+    s.cfl = t.Number("cfl", s.cfl, {0, 0.7, true, false});
     s.dt_min = t.Number("dt_min", s.dt_min, {0, 1, true, false});
     s.dt_max = t.Number("dt_max", s.dt_max, {0, 1, true, false});
     if (s.dt_max < s.dt_min) t.Fail("dt_max", "dt_max must be at least dt_min");
@@ -200,8 +211,12 @@ Scene ParseScene(const std::string& text, const fs::path& file) {
   }
   {
     TomlReader t = module_table("surface_tension");
-    scene.surface_tension.kappa = t.Number("kappa", scene.surface_tension.kappa, Range::NonNegative());
-    scene.surface_tension.kappa_boundary = t.Number("kappa_boundary", scene.surface_tension.kappa, Range::NonNegative());
+    SurfaceTensionSettings& st = scene.surface_tension;
+    st.model = t.String("model", st.model, {"he2014", "akinci2013"});
+    st.kappa = t.Number("kappa", st.kappa, Range::NonNegative());
+    st.kappa_boundary = t.Number("kappa_boundary", st.kappa, Range::NonNegative());
+    st.gamma = t.Number("gamma", st.gamma, Range::NonNegative());
+    st.beta = t.Number("beta", st.beta, Range::NonNegative());
     t.RejectUnknownKeys();
   }
   {

@@ -107,5 +107,21 @@ TEST(Scene, QualityPresetsSetDefaultsAndExplicitValuesWin) {
   EXPECT_EQ(plain.fluid.precision, "float");
 }
 
+TEST(Scene, Im2013MethodPresetSetsTheBaselineAndExplicitValuesWin) {
+  const Scene plain = ParseScene("", "m.toml");
+  EXPECT_EQ(plain.info.method, "rime");
+  EXPECT_EQ(plain.freezing.growth, "anisotropic");
+  EXPECT_EQ(plain.surface_tension.model, "he2014");
+  EXPECT_GT(plain.viscosity.wall_beta0, 0);
+  const Scene im = ParseScene("[scene]\nmethod = \"im2013\"\n", "m.toml");
+  EXPECT_EQ(im.freezing.growth, "isotropic");
+  EXPECT_EQ(im.surface_tension.model, "akinci2013");
+  EXPECT_EQ(im.viscosity.wall_beta0, 0);
+  const Scene sticky = ParseScene("[scene]\nmethod = \"im2013\"\n[simulation]\nmodules = [\"gravity\", \"viscosity\"]\n[viscosity]\nwall_beta0 = 0.5\n",
+                                  "m.toml");
+  EXPECT_EQ(sticky.viscosity.wall_beta0, 0.5) << "an explicit value overrides the preset";
+  EXPECT_THROW(ParseScene("[scene]\nmethod = \"im2014\"\n", "m.toml"), rime::Error);
+}
+
 }  // namespace
 }  // namespace rime::io

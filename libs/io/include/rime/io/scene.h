@@ -21,6 +21,7 @@ struct SceneInfo {
   double fps = 24;         // output frames per second
   double end_time = 2.0;   // s
   std::string quality;     // "", "preview", "production", "reference" (presets, set before explicit values)
+  std::string method = "rime";  // | "im2013": the baseline the paper improves on (preset, set before explicit values)
 };
 
 struct FluidSettings {
@@ -57,8 +58,11 @@ struct ViscositySettings {
 };
 
 struct SurfaceTensionSettings {
+  std::string model = "he2014";  // | "akinci2013" (the Im et al. 2013 baseline)
   double kappa = 0.02;           // N (He 2014, spec §5.3)
   double kappa_boundary = 0.02;  // adhesion to solids and ice
+  double gamma = 0.05;           // Akinci 2013 cohesion and curvature coefficient
+  double beta = 0.05;            // Akinci 2013 adhesion to solids and ice
 };
 
 struct AirPressureSettings {

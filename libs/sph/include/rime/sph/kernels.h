@@ -8,6 +8,7 @@
 /// density *error* ρ − ρ0 is carried separately so float keeps its precision (spec §15).
 #pragma once
 
+#include <cmath>
 #include <cstdint>
 
 #include "rime/core/hd.h"
@@ -170,6 +171,74 @@ struct SurfaceTensionAcceleration {
     }
     for (std::uint32_t k = fb.offsets[i], e = fb.offsets[i + 1]; k < e; ++k) wall += fb.grad[k] * boundary_volume[fb.index[k]];
     accel[i] += (fluid * kappa + wall * (kappa_boundary * ei)) / (T(4) * density[i]);
+  }
+};
+
+/// Akinci et al. 2013 cohesion spline C(r) for the support radius H (their h), normalised as
+/// published: 32/(π H⁹) {(H−r)³r³ for H/2 < r ≤ H; 2(H−r)³r³ − H⁶/64 for 0 < r ≤ H/2}.
+template <class T>
+RIME_HDI T AkinciCohesion(T r, T H) {
+  if (r <= T(0) || r > H) return T(0);
+  const T a = (H - r) * (H - r) * (H - r) * r * r * r, H3 = H * H * H;
+  const T c = T(32) / (T(3.14159265358979323846) * H3 * H3 * H3);
+  return T(2) * r > H ? c * a : c * (T(2) * a - H3 * H3 / T(64));
+}
+
+/// Akinci et al. 2013 adhesion spline A(r) = 0.007/H^3.25 (−4r²/H + 6r − 2H)^¼ for H/2 < r ≤ H.
+template <class T>
+RIME_HDI T AkinciAdhesion(T r, T H) {
+  if (T(2) * r <= H || r > H) return T(0);
+  using std::pow;
+  return T(0.007) / pow(H, T(3.25)) * pow(-T(4) * r * r / H + T(6) * r - T(2) * H, T(0.25));
+}
+
+/// Akinci 2013 surface normal n_i = H Σ_j (m/ρ_j) ∇W_ij (the Im et al. 2013 baseline's surface tension).
+template <class T>
+struct AkinciNormal {
+  Pairs<T> ff;
+  const T* density;
+  T mass, support;
+  Vec3<T>* normal;
+  RIME_HD void operator()(Index i) const {
+    Vec3<T> n{};
+    for (std::uint32_t k = ff.offsets[i], e = ff.offsets[i + 1]; k < e; ++k) n += ff.grad[k] * (mass / density[ff.index[k]]);
+    normal[i] = n * support;
+  }
+};
+
+/// Akinci 2013 surface tension and adhesion per unit mass:
+/// a_i = Σ_j K_ij (−γ m C(r) x̂_ij − γ (n_i − n_j)) − β Σ_b Ψ_b A(r) x̂_ib, K_ij = 2ρ0/(ρ_i + ρ_j).
+/// Antisymmetric in i, j, so it conserves momentum among the water.
+template <class T>
+struct AkinciSurfaceTensionAcceleration {
+  Pairs<T> ff, fb;
+  const Vec3<T>* x;
+  const Vec3<T>* boundary_x;
+  const T* density;
+  const Vec3<T>* normal;
+  const T* boundary_psi;
+  T mass, gamma, beta, rest_density, support;
+  Vec3<T>* accel;
+  RIME_HD void operator()(Index i) const {
+    const Vec3<T> xi = x[i], ni = normal[i];
+    const T rhoi = density[i];
+    Vec3<T> a{};
+    for (std::uint32_t k = ff.offsets[i], e = ff.offsets[i + 1]; k < e; ++k) {
+      const std::uint32_t j = ff.index[k];
+      const Vec3<T> xij = xi - x[j];
+      const T r = Norm(xij);
+      Vec3<T> f = (ni - normal[j]) * (-gamma);
+      if (r > T(1e-6) * support) f += xij * (-gamma * mass * AkinciCohesion(r, support) / r);  // coincident pairs: no direction
+      a += f * (T(2) * rest_density / (rhoi + density[j]));
+    }
+    if (beta != T(0))
+      for (std::uint32_t k = fb.offsets[i], e = fb.offsets[i + 1]; k < e; ++k) {
+        const std::uint32_t b = fb.index[k];
+        const Vec3<T> xib = xi - boundary_x[b];
+        const T r = Norm(xib);
+        if (r > T(1e-6) * support) a += xib * (-beta * boundary_psi[b] * AkinciAdhesion(r, support) / r);
+      }
+    accel[i] += a;
   }
 };
 
@@ -445,6 +514,7 @@ struct CompactionOrder {
   X(rime::sph::kernels::PairValues<T>) X(rime::sph::kernels::Density<T>) X(rime::sph::kernels::InitAcceleration<T>) \
   X(rime::sph::kernels::ViscosityAcceleration<T>) X(rime::sph::kernels::SurfaceColor<T>)                           \
   X(rime::sph::kernels::SurfaceEnergy<T>) X(rime::sph::kernels::SurfaceTensionAcceleration<T>)                     \
+  X(rime::sph::kernels::AkinciNormal<T>) X(rime::sph::kernels::AkinciSurfaceTensionAcceleration<T>)                 \
   X(rime::sph::kernels::AirPressureAcceleration<T>) X(rime::sph::kernels::AdvectVelocity<T>)                       \
   X(rime::sph::kernels::PredictAdvection<T>) X(rime::sph::kernels::DisplacementSum<T>)                             \
   X(rime::sph::kernels::PressureUpdate<T>) X(rime::sph::kernels::IntegratePressure<T>)                             \
