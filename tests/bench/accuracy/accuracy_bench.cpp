@@ -1,0 +1,354 @@
+// Speed/accuracy study (issue 10): a small quasi-2D dam break (column a wide, 2a high, a few
+// particles across the channel depth) swept over the knobs users turn, one at a time around the
+// production defaults, plus the quality presets. Every setting records cost (wall and CPU time,
+// steps, pressure iterations, peak RSS) and error (density error, volume drift, surge-front
+// position and front particle positions against a reference run). Prints a table, writes CSV and
+// JSON, and plots error against cost with gnuplot when it is installed.
+//   rime-bench-accuracy [--repeats R] [--end T] [--out DIR] [--only GROUP] [--no-freezing] [--no-plots]
+// Each run is a child process (fork) so that its peak RSS and CPU time are its own (wait4).
+#include <sys/resource.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <CLI/CLI.hpp>
+#include <fmt/format.h>
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "rime/core/error.h"
+#include "rime/exec/device.h"
+#include "rime/sph/simulation.h"
+#include "../../../libs/sph/tests/test_scenes.h"
+
+using namespace rime;
+using nlohmann::json;
+
+namespace {
+
+constexpr double kA = 0.25;        // column width, m (height 2a)
+constexpr double kDepth = 0.075;   // channel depth, m (6 particles at the base spacing)
+constexpr int kBasePerA = 20;      // base resolution: a = 20 d_p (d_p = 12.5 mm)
+constexpr double kSampleEvery = 0.1;  // s: the front is compared at 0.1, 0.2, ... s
+
+struct Setting {
+  std::string group, label;
+  io::Scene scene;
+  int per_a = kBasePerA;
+  bool freezing = false;
+};
+
+// Production defaults, or a preset's knobs taken from the scene parser (one source of truth).
+io::Scene BaseScene(const std::string& quality, int per_a, bool freezing) {
+  io::Scene preset = quality.empty() ? io::Scene{} : io::ParseScene("[scene]\nquality = \"" + quality + "\"\n", "preset.toml");
+  const double dp = kA / per_a;
+  const int ny = std::max(2, int(std::lround(kDepth / dp)));
+  io::Scene scene = sph::test::ColumnScene(dp, per_a, ny, 2 * per_a, 0);
+  scene.solver = preset.solver;
+  scene.fluid.precision = preset.fluid.precision;
+  scene.fluid.smoothing_ratio = preset.fluid.smoothing_ratio;
+  scene.solver.time_step = "cfl";
+  scene.modules = {"gravity"};
+  if (freezing) {
+    // The examples' calibrated thresholds; the tank walls and floor are the cold solid.
+    scene.modules.insert("freezing");
+    scene.freezing.glaze_threshold = 0.05;
+    scene.freezing.icicle_threshold = 0.01;
+  }
+  return scene;
+}
+
+// Surge front: the furthest particle along x with at least 3 others within 2 d_p (spray ahead of
+// the surge does not count), as z/a from the water's initial back face (walls act 0.6 d_p out).
+template <class T>
+double FrontZ(const std::vector<Vec3<T>>& x, double dp) {
+  std::vector<int> order(x.size());
+  for (int i = 0; i < int(x.size()); ++i) order[i] = i;
+  std::sort(order.begin(), order.end(), [&](int a, int b) { return x[a].x > x[b].x; });
+  const double r2 = 4 * dp * dp;
+  for (int i : order) {
+    int count = 0;
+    for (int n = 0; n < int(x.size()) && count < 3; ++n)
+      if (n != i && SquaredNorm(Vec3d(x[n]) - Vec3d(x[i])) < r2) ++count;
+    if (count >= 3) return (x[i].x + 0.5 * dp - 0.6 * dp) / kA;
+  }
+  return 0;
+}
+
+template <class T>
+json RunSim(const Setting& s, double end_time) {
+  const io::Scene& scene = s.scene;
+  const double dp = scene.fluid.spacing;
+  const double length = 6 * kA, depth = sph::test::BoxWidth(dp, std::max(2, int(std::lround(kDepth / dp)))), wall = 2.5 * kA;
+  sph::Simulation<T> sim(scene, exec::Device::Cpu());
+  sim.AddBoundaryObject(sph::test::BoxBoundary(dp, length, depth, wall), "box");
+  sim.Initialize();
+  const double mass = scene.fluid.particle_mass(), rho0 = scene.fluid.rest_density;
+  // Volume from the density, counting only compression (free-surface particles have a kernel
+  // deficit that is not volume gain): V = sum m / max(rho, rho0).
+  auto volume = [&] {
+    double v = 0;
+    for (T rho : sim.Densities()) v += mass / std::max(double(rho), rho0);
+    return v;
+  };
+  const auto t0 = std::chrono::steady_clock::now();
+  double err_sum = 0, err_max = 0;
+  long long iterations = 0, steps = 0, unconverged = 0;
+  double volume0 = -1;
+  std::vector<double> front;
+  bool diverged = false;
+  std::string failure;
+  try {
+    for (int k = 1; k * kSampleEvery <= end_time + 1e-9; ++k) {
+      const double stop = k * kSampleEvery;
+      while (sim.time() < stop - 1e-12) {
+        const sph::StepStats st = sim.Step(sim.NextTimeStep(stop));
+        if (volume0 < 0) volume0 = volume();  // after the first step: densities exist
+        err_sum += st.average_density_error, err_max = std::max(err_max, st.max_density_error);
+        iterations += st.pressure_iterations, ++steps, unconverged += st.converged ? 0 : 1;
+      }
+      front.push_back(FrontZ(sim.Positions(), dp));
+    }
+  } catch (const std::exception& e) {
+    diverged = true, failure = e.what();
+  }
+  const double wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  json r = {{"wall_s", wall_s}, {"steps", steps}, {"mean_iterations", steps ? double(iterations) / steps : 0.0},
+            {"unconverged_steps", unconverged}, {"mean_density_error", steps ? err_sum / steps : 0.0},
+            {"max_density_error", err_max}, {"volume_drift", diverged ? 0.0 : volume() / volume0 - 1}, {"front_z", front},
+            {"fluid", sim.fluid_count()}, {"ice", sim.ice_count()}, {"diverged", diverged}, {"failure", failure},
+            {"dp", dp}, {"threads", exec::CpuThreads()}};
+  // Final positions by id, for the comparison with the reference run at the same spacing.
+  const auto x = sim.Positions();
+  const auto ids = sim.Ids();
+  std::vector<std::vector<double>> by_id;
+  for (std::size_t i = 0; i < x.size(); ++i) by_id.push_back({double(ids[i]), double(x[i].x), double(x[i].y), double(x[i].z)});
+  r["positions"] = by_id;
+  return r;
+}
+
+// One run in a child process; the parent gets the child's JSON through a pipe and its own
+// rusage (CPU time, peak RSS) from wait4.
+json RunChild(const Setting& s, double end_time, int threads) {
+  int fd[2];
+  if (pipe(fd) != 0) throw std::runtime_error("pipe failed");
+  const pid_t pid = fork();
+  if (pid == 0) {
+    close(fd[0]);
+    json r;
+    try {
+      exec::SetCpuThreads(threads);
+      r = s.scene.fluid.precision == "double" ? RunSim<double>(s, end_time) : RunSim<float>(s, end_time);
+    } catch (const std::exception& e) {
+      r = {{"diverged", true}, {"failure", e.what()}};
+    }
+    const std::string text = r.dump();
+    std::size_t off = 0;
+    while (off < text.size()) {
+      const ssize_t n = write(fd[1], text.data() + off, text.size() - off);
+      if (n <= 0) break;
+      off += std::size_t(n);
+    }
+    close(fd[1]);
+    _exit(0);
+  }
+  close(fd[1]);
+  std::string text;
+  char buf[1 << 16];
+  ssize_t n;
+  while ((n = read(fd[0], buf, sizeof buf)) > 0) text.append(buf, std::size_t(n));
+  close(fd[0]);
+  int status = 0;
+  rusage usage{};
+  wait4(pid, &status, 0, &usage);
+  json r = text.empty() ? json{{"diverged", true}, {"failure", "child crashed"}} : json::parse(text);
+  r["cpu_s"] = usage.ru_utime.tv_sec + usage.ru_stime.tv_sec + 1e-6 * (usage.ru_utime.tv_usec + usage.ru_stime.tv_usec);
+  r["peak_rss_mib"] = usage.ru_maxrss / 1024.0;
+  return r;
+}
+
+double Median(std::vector<double> v) {
+  std::sort(v.begin(), v.end());
+  return v.empty() ? 0 : v[v.size() / 2];
+}
+
+std::string LoadAverage() {
+  double l[3] = {0, 0, 0};
+  if (getloadavg(l, 3) != 3) return "?";
+  char b[64];
+  std::snprintf(b, sizeof b, "%.2f %.2f %.2f", l[0], l[1], l[2]);
+  return b;
+}
+
+std::vector<Setting> Settings(bool with_freezing) {
+  std::vector<Setting> v;
+  auto add = [&](std::string group, std::string label, auto edit, int per_a = kBasePerA, std::string quality = "", bool fr = false) {
+    Setting s{group, label, BaseScene(quality, per_a, fr), per_a, fr};
+    edit(s.scene);
+    v.push_back(s);
+  };
+  auto none = [](io::Scene&) {};
+  // The reference: the finest solver settings at the base spacing (double, eta 1e-5, CFL 0.1).
+  auto reference = [](io::Scene& sc) {
+    sc.solver.eta = 1e-5, sc.solver.cfl = 0.1, sc.solver.dt_max = 0.001, sc.solver.max_iterations = 2000;
+    sc.fluid.precision = "double";
+  };
+  add("reference", "reference (double, eta 1e-5, CFL 0.1, dt_max 1 ms)", reference);
+  add("default", "production defaults", none);
+  for (double eta : {1e-2, 3e-3, 3e-4, 1e-4})
+    add("eta", "eta " + fmt::format("{:g}", eta), [=](io::Scene& sc) { sc.solver.eta = eta, sc.solver.max_iterations = 1000; });
+  for (double cfl : {0.2, 0.6}) add("cfl", fmt::format("CFL {:g}", cfl), [=](io::Scene& sc) { sc.solver.cfl = cfl; });
+  for (double dtm : {0.002, 0.01})
+    add("dt_max", fmt::format("dt_max {:g} ms", 1e3 * dtm), [=](io::Scene& sc) { sc.solver.dt_max = dtm; });
+  for (int per_a : {14, 28}) add("spacing", fmt::format("a = {} d_p", per_a), none, per_a);
+  for (double w : {0.3, 0.7}) add("omega", fmt::format("omega {:g}", w), [=](io::Scene& sc) { sc.solver.omega = w; });
+  add("kernel", "h = 1.2 d_p", [](io::Scene& sc) { sc.fluid.smoothing_ratio = 1.2; });
+  add("precision", "double", [](io::Scene& sc) { sc.fluid.precision = "double"; });
+  for (const char* q : {"preview", "production", "reference"}) add("preset", std::string("preset ") + q, none, kBasePerA, q);
+  if (with_freezing) {
+    add("freezing", "freezing: reference", reference, kBasePerA, "", true);
+    for (const char* q : {"preview", "production", "reference"})
+      add("freezing", std::string("freezing: preset ") + q, none, kBasePerA, q, true);
+  }
+  return v;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"Rime speed/accuracy study (dam break over the solver knobs)"};
+  int repeats = 3, threads = 0;
+  double end_time = 0.4;
+  std::string out_dir = "tests/bench/accuracy/results", only;
+  bool no_freezing = false, no_plots = false;
+  app.add_option("--repeats", repeats, "Runs per setting (median time reported)");
+  app.add_option("--end", end_time, "Simulated time, s (front sampled every 0.1 s)");
+  app.add_option("-j,--threads", threads, "CPU threads (default all)");
+  app.add_option("--out", out_dir, "Folder for results.csv, results.json and the plots");
+  app.add_option("--only", only, "Run only this group (and the reference)");
+  app.add_flag("--no-freezing", no_freezing, "Skip the freezing scene");
+  app.add_flag("--no-plots", no_plots, "Do not call gnuplot");
+  CLI11_PARSE(app, argc, argv);
+  std::filesystem::create_directories(out_dir);
+  const std::string load_before = LoadAverage();
+  const unsigned hw = std::thread::hardware_concurrency();
+  const int used_threads = threads > 0 ? threads : int(hw);
+
+  std::vector<Setting> settings = Settings(!no_freezing);
+  std::vector<json> rows;
+  json ref, fref;  // reference runs (plain, freezing)
+  for (const Setting& s : settings) {
+    if (!only.empty() && s.group != only && s.group != "reference" && !(only == "freezing" && s.label == "freezing: reference")) continue;
+    std::vector<double> wall, cpu, rss;
+    json first;
+    for (int k = 0; k < repeats; ++k) {
+      json r = RunChild(s, end_time, threads);
+      if (k == 0) first = r;
+      wall.push_back(r.value("wall_s", 0.0)), cpu.push_back(r["cpu_s"]), rss.push_back(r["peak_rss_mib"]);
+      if (r.value("diverged", false)) break;
+    }
+    json row = first;
+    row["group"] = s.group, row["label"] = s.label;
+    row["eta"] = s.scene.solver.eta, row["cfl"] = s.scene.solver.cfl, row["dt_max"] = s.scene.solver.dt_max;
+    row["omega"] = s.scene.solver.omega, row["smoothing_ratio"] = s.scene.fluid.smoothing_ratio;
+    row["precision"] = s.scene.fluid.precision, row["per_a"] = s.per_a, row["max_iterations"] = s.scene.solver.max_iterations;
+    row["wall_s"] = Median(wall), row["cpu_s"] = Median(cpu), row["peak_rss_mib"] = Median(rss), row["repeats"] = int(wall.size());
+    if (s.label.rfind("reference (", 0) == 0) ref = row;
+    if (s.label == "freezing: reference") fref = row;
+    // Errors against the reference run of the same scene.
+    const json& base = s.freezing ? fref : ref;
+    double front_mean = 0, front_max = 0;
+    const auto fz = row.value("front_z", std::vector<double>{}), fz_ref = base.value("front_z", std::vector<double>{});
+    const std::size_t nf = std::min(fz.size(), fz_ref.size());
+    for (std::size_t i = 0; i < nf; ++i) {
+      const double e = std::fabs(fz[i] - fz_ref[i]) / fz_ref[i];
+      front_mean += e / nf, front_max = std::max(front_max, e);
+    }
+    row["front_error_mean"] = nf ? front_mean : NAN;
+    row["front_error_max"] = nf ? front_max : NAN;
+    // Mean distance of the front particles (the 10 % furthest along x in the reference) from
+    // their reference positions, in d_p; only at the reference's spacing (same particle ids).
+    double pos_diff = NAN;
+    if (s.per_a == kBasePerA && base.contains("positions") && row.contains("positions") && !row["diverged"].get<bool>()) {
+      std::map<long long, Vec3d> mine;
+      for (const auto& p : row["positions"]) mine[(long long)p[0].get<double>()] = {p[1].get<double>(), p[2].get<double>(), p[3].get<double>()};
+      std::vector<std::pair<double, long long>> by_x;
+      std::map<long long, Vec3d> theirs;
+      for (const auto& p : base["positions"]) {
+        theirs[(long long)p[0].get<double>()] = {p[1].get<double>(), p[2].get<double>(), p[3].get<double>()};
+        by_x.push_back({p[1].get<double>(), (long long)p[0].get<double>()});
+      }
+      std::sort(by_x.rbegin(), by_x.rend());
+      const std::size_t n = std::max<std::size_t>(1, by_x.size() / 10);
+      double sum = 0;
+      std::size_t count = 0;
+      for (std::size_t i = 0; i < n; ++i) {
+        auto it = mine.find(by_x[i].second);
+        if (it == mine.end()) continue;
+        sum += Norm(it->second - theirs[by_x[i].second]), ++count;
+      }
+      if (count) pos_diff = sum / count / row["dp"].get<double>();
+    }
+    row["front_position_diff_dp"] = pos_diff;
+    row["ice_diff"] = s.freezing && base.contains("ice") ? double(row.value("ice", 0LL) - base.value("ice", 0LL)) : NAN;
+    std::fprintf(stderr, "  %-52s %6.2f s wall  %5lld steps  front err %5.1f%%\n", s.label.c_str(), row["wall_s"].get<double>(),
+                 row.value("steps", 0LL), 100 * front_mean);
+    rows.push_back(row);
+  }
+
+  const std::string load_after = LoadAverage();
+  std::printf("\nRime speed/accuracy study: dam break a = %.2f m (height 2a), %.2f s simulated, %d CPU threads, median of %d runs; "
+              "load average before %s, after %s\n",
+              kA, end_time, used_threads, repeats, load_before.c_str(), load_after.c_str());
+  std::printf("errors against the reference run of the same scene; front error = |Z - Z_ref| / Z_ref at 0.1 s intervals; "
+              "pos = mean displacement of the front's particles from the reference, in d_p\n");
+  std::printf("%-46s %7s %6s %7s %6s %6s %8s %8s %8s %7s %7s %6s %6s %6s\n", "setting", "water", "wall s", "CPU s", "steps", "iter",
+              "MiB", "rho avg%", "rho max%", "vol %", "front%", "max%", "pos", "ice");
+  std::ofstream csv(out_dir + "/results.csv");
+  csv << "group,label,water,dp,eta,cfl,dt_max,omega,smoothing_ratio,precision,wall_s,cpu_s,steps,mean_iterations,peak_rss_mib,"
+         "mean_density_error,max_density_error,volume_drift,front_error_mean,front_error_max,front_position_diff_dp,ice,ice_diff,diverged\n";
+  json out = json::array();
+  for (json& r : rows) {
+    const bool div = r.value("diverged", false);
+    std::printf("%-46s %7lld %6.2f %7.2f %6lld %6.1f %8.0f %8.3f %8.2f %7.3f %7.2f %6.2f %6.2f %6s%s\n", r["label"].get<std::string>().c_str(),
+                r.value("fluid", 0LL), r["wall_s"].get<double>(), r["cpu_s"].get<double>(), r.value("steps", 0LL),
+                r.value("mean_iterations", 0.0), r["peak_rss_mib"].get<double>(), 100 * r.value("mean_density_error", 0.0),
+                100 * r.value("max_density_error", 0.0), 100 * r.value("volume_drift", 0.0), 100 * r["front_error_mean"].get<double>(),
+                100 * r["front_error_max"].get<double>(), r["front_position_diff_dp"].get<double>(),
+                r["group"] == "freezing" ? std::to_string(r.value("ice", 0LL)).c_str() : "-", div ? "  DIVERGED" : "");
+    csv << r["group"].get<std::string>() << ",\"" << r["label"].get<std::string>() << "\"," << r.value("fluid", 0LL) << ","
+        << r.value("dp", 0.0) << "," << r["eta"] << "," << r["cfl"] << "," << r["dt_max"] << "," << r["omega"] << ","
+        << r["smoothing_ratio"] << "," << r["precision"].get<std::string>() << "," << r["wall_s"] << "," << r["cpu_s"] << ","
+        << r.value("steps", 0LL) << "," << r.value("mean_iterations", 0.0) << "," << r["peak_rss_mib"] << ","
+        << r.value("mean_density_error", 0.0) << "," << r.value("max_density_error", 0.0) << "," << r.value("volume_drift", 0.0)
+        << "," << r["front_error_mean"].get<double>() << "," << r["front_error_max"].get<double>() << ","
+        << r["front_position_diff_dp"].get<double>() << "," << r.value("ice", 0LL) << "," << r["ice_diff"].get<double>() << ","
+        << (div ? 1 : 0) << "\n";
+    r.erase("positions");
+    out.push_back(r);
+  }
+  csv.close();
+  json doc = {{"study", "dam break speed/accuracy"}, {"column_width_m", kA}, {"end_time_s", end_time}, {"threads", used_threads},
+              {"repeats", repeats}, {"load_average_before", load_before}, {"load_average_after", load_after}, {"runs", out}};
+  std::ofstream(out_dir + "/results.json") << doc.dump(2) << "\n";
+  std::printf("wrote %s/results.csv and %s/results.json\n", out_dir.c_str(), out_dir.c_str());
+
+  if (no_plots) return 0;
+  if (std::system("command -v gnuplot > /dev/null 2>&1") != 0) {
+    std::printf("gnuplot not found: plots skipped (apt-get install gnuplot-nox, then run plot.gp in %s)\n", out_dir.c_str());
+    return 0;
+  }
+  const std::string cmd = "gnuplot -e \"dir='" + out_dir + "'\" " + std::string(RIME_ACCURACY_DIR) + "/plot.gp";
+  if (std::system(cmd.c_str()) != 0) std::printf("gnuplot failed: %s\n", cmd.c_str());
+  else std::printf("wrote %s/pareto_*.png\n", out_dir.c_str());
+  return 0;
+}
