@@ -1,0 +1,450 @@
+// Rime against the Im et al. 2013 baseline it improves on (issue 10, "The paper's comparisons,
+// reproducible"). Two procedural scenes, each run twice with the same setup, once with
+// `[scene] method = "rime"` (anisotropic growth, He 2014 surface tension, wall stickiness) and once
+// with `method = "im2013"` (isotropic growth, Akinci 2013 surface tension, no wall stickiness):
+//   drop:  a sphere of water dropped onto a solid sphere standing above a ground plane;
+//   throw: a block of water thrown sideways at the same sphere.
+// Measures (definitions in RESULTS.md and below): ice count; specks (ice not connected to a solid
+// through other ice); water lost to splashing; roughness of the ice on the sphere. Prints a table,
+// writes results.json / results.csv and top/side PNG views of the final particles.
+//
+// Usage: rime-compare-im2013 [--full] [--out DIR] [--scene drop|throw] [--frames]
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdint>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <string>
+#include <thread>
+#include <unordered_map>
+#include <vector>
+
+#include "rime/boundary/object.h"
+#include "rime/core/error.h"
+#include "rime/core/log.h"
+#include "rime/exec/device.h"
+#include "rime/io/particles.h"
+#include "rime/io/scene.h"
+#include "rime/sph/simulation.h"
+
+namespace fs = std::filesystem;
+
+namespace rime::compare {
+namespace {
+
+constexpr double kSphereRadius = 0.2;
+constexpr std::size_t kBitSize = 3;
+const Vec3d kSphereCenter{0, 0, 0.35};
+
+// Both scenes share the ground, the sphere and the freezing thresholds of examples/default.toml.
+std::string SceneText(const std::string& which, const std::string& method, bool full) {
+  const double dp = full ? 0.0125 : 0.02;
+  const double end = full ? 1.5 : 1.0;
+  std::string water;
+  if (which == "drop") {
+    // A ball of water 12 cm in radius (about 900 particles at 2 cm), released 15 cm above the sphere's top.
+    water = "[[water_block]]\nshape = \"sphere\"\ncenter = [0.0, 0.0, 0.82]\nradius = 0.12\n";
+  } else {
+    // A 16 cm cube of water (512 particles at 2 cm) thrown at 3 m/s towards the sphere's side, slightly upwards.
+    water = "[[water_block]]\nshape = \"box\"\nmin = [-0.62, -0.08, 0.30]\nmax = [-0.46, 0.08, 0.46]\nvelocity = [3.0, 0.0, 0.5]\n";
+  }
+  return fmt::format(R"([scene]
+name = "{0}"
+end_time = {1}
+method = "{2}"
+
+[water]
+spacing = {3}
+
+[simulation]
+modules = ["gravity", "viscosity", "surface_tension", "freezing"]
+
+[freezing]
+glaze_threshold = 0.05
+icicle_threshold = 0.01
+
+[domain]
+min = [-0.8, -0.8, -0.05]
+max = [0.8, 0.8, 1.0]
+
+[[solid]]
+name = "ground"
+shape = "plane"
+size = [1.6, 1.6, 1.0]
+
+[[solid]]
+name = "sphere"
+shape = "sphere"
+radius = {4}
+translate = [{5}, {6}, {7}]
+
+{8})",
+                     which, end, method, dp, kSphereRadius, kSphereCenter.x, kSphereCenter.y, kSphereCenter.z, water);
+}
+
+// Uniform hash grid over points, for fixed-radius queries (radius <= cell).
+class Grid {
+ public:
+  Grid(const std::vector<Vec3d>& p, double cell) : p_(p), cell_(cell) {
+    for (std::size_t i = 0; i < p.size(); ++i) cells_[Key(Cell(p[i]))].push_back(int(i));
+  }
+  template <class F>
+  void ForNear(const Vec3d& x, double r, F&& f) const {
+    const auto c = Cell(x);
+    for (int dz = -1; dz <= 1; ++dz)
+      for (int dy = -1; dy <= 1; ++dy)
+        for (int dx = -1; dx <= 1; ++dx) {
+          const auto it = cells_.find(Key({c[0] + dx, c[1] + dy, c[2] + dz}));
+          if (it == cells_.end()) continue;
+          for (int j : it->second)
+            if (SquaredNorm(p_[j] - x) <= r * r) f(j);
+        }
+  }
+  bool AnyNear(const Vec3d& x, double r) const {
+    bool any = false;
+    ForNear(x, r, [&](int) { any = true; });
+    return any;
+  }
+
+ private:
+  std::array<std::int64_t, 3> Cell(const Vec3d& x) const {
+    return {std::int64_t(std::floor(x.x / cell_)), std::int64_t(std::floor(x.y / cell_)), std::int64_t(std::floor(x.z / cell_))};
+  }
+  static std::int64_t Key(const std::array<std::int64_t, 3>& c) {
+    return ((c[0] & 0x1FFFFF) << 42) | ((c[1] & 0x1FFFFF) << 21) | (c[2] & 0x1FFFFF);
+  }
+  const std::vector<Vec3d>& p_;
+  double cell_;
+  std::unordered_map<std::int64_t, std::vector<int>> cells_;
+};
+
+struct Result {
+  std::string scene, method;
+  bool ok = true;
+  std::string error;
+  double sim_time = 0, wall_s = 0;
+  std::int64_t steps = 0, water_initial = 0;
+  std::int64_t ice = 0, ice_components = 0, speck_components = 0, specks = 0;
+  std::int64_t ice_on_sphere = 0;     // attached ice within 6 d_p of the sphere's surface (roughness input)
+  std::int64_t ice_sphere_attached = 0, ice_ground_only = 0;  // by what the component touches
+  std::int64_t bits = 0;  // ice in components of at most kBitSize particles, attached or not (scattered ice)
+  std::int64_t fluid_end = 0, removed = 0, airborne = 0, off_object = 0;
+  double roughness_mm = 0, mean_thickness_mm = 0;
+  int covered_bins = 0, bins = 0;
+  double max_average_density_error = 0;
+  bool finite = true;
+  std::vector<Vec3d> fluid, ice_attached, ice_specks, solid;
+};
+
+// Roughness of the ice on the sphere: directions from the sphere's centre are binned on a
+// Fibonacci sphere with bins about 2 d_p apart on the surface; a bin's ice height is the largest
+// distance beyond the sphere's radius of the ice particles in it (the outer ice surface). The
+// roughness is the RMS difference between each covered bin's height and the mean height of its
+// covered neighbour bins (within 1.6 bin spacings): a high-pass measure, 0 for a uniform coat,
+// d_p-sized for ice standing up in isolated particles or spikes.
+void MeasureRoughness(const std::vector<Vec3d>& ice, double dp, Result& r) {
+  const double bin_arc = 2 * dp / kSphereRadius;  // rad
+  const int n = std::max(12, int(std::lround(4 * M_PI / (bin_arc * bin_arc))));
+  std::vector<Vec3d> dir(n);
+  const double golden = M_PI * (3 - std::sqrt(5.0));
+  for (int k = 0; k < n; ++k) {
+    const double z = 1 - 2 * (k + 0.5) / n, s = std::sqrt(1 - z * z);
+    dir[k] = {s * std::cos(golden * k), s * std::sin(golden * k), z};
+  }
+  std::vector<double> height(n, -1);
+  double thickness = 0;
+  for (const Vec3d& p : ice) {
+    const Vec3d d = p - kSphereCenter;
+    const double len = Norm(d);
+    if (len > kSphereRadius + 6 * dp) continue;  // icicles hanging off and ice on the ground are not the coat
+    int best = 0;
+    double best_dot = -2;
+    for (int k = 0; k < n; ++k)
+      if (const double c = Dot(dir[k], d) / len; c > best_dot) best_dot = c, best = k;
+    height[best] = std::max(height[best], len - kSphereRadius);
+    ++r.ice_on_sphere;
+  }
+  const double neighbor_cos = std::cos(1.6 * std::sqrt(4 * M_PI / n));
+  double sum2 = 0;
+  int counted = 0, covered = 0;
+  for (int k = 0; k < n; ++k) {
+    if (height[k] < 0) continue;
+    ++covered, thickness += height[k];
+    double mean = 0;
+    int m = 0;
+    for (int j = 0; j < n; ++j)
+      if (j != k && height[j] >= 0 && Dot(dir[j], dir[k]) > neighbor_cos) mean += height[j], ++m;
+    if (m == 0) continue;
+    const double dev = height[k] - mean / m;
+    sum2 += dev * dev, ++counted;
+  }
+  r.bins = n, r.covered_bins = covered;
+  r.roughness_mm = counted ? 1e3 * std::sqrt(sum2 / counted) : 0;
+  r.mean_thickness_mm = covered ? 1e3 * thickness / covered : 0;
+}
+
+Result Run(const std::string& which, const std::string& method, bool full, const fs::path& out, bool frames) {
+  Result r;
+  r.scene = which, r.method = method;
+  const io::Scene scene = io::ParseScene(SceneText(which, method, full), "compare_" + which + ".toml");
+  const double dp = scene.fluid.spacing;
+  sph::Simulation<float> sim(scene, exec::Device::Cpu());
+  for (std::size_t k = 0; k < scene.solids.size(); ++k) {
+    boundary::BoundarySettings settings;
+    settings.particle_spacing = dp;
+    settings.smoothing_ratio = scene.fluid.smoothing_ratio;
+    settings.rest_density = scene.fluid.rest_density;
+    sim.AddBoundaryObject(boundary::ToParticleFrame(boundary::BuildBoundaryObject(scene.solids[k], std::uint32_t(k), {}, settings)),
+                          scene.solids[k].name);
+  }
+  sim.Initialize();
+  r.water_initial = sim.fluid_count();
+  const auto start = std::chrono::steady_clock::now();
+  try {
+    while (sim.time() < scene.info.end_time - 1e-9) {
+      const sph::StepStats st = sim.Step(sim.NextTimeStep(scene.info.end_time));
+      r.max_average_density_error = std::max(r.max_average_density_error, st.average_density_error);
+    }
+  } catch (const Error& e) {
+    r.ok = false, r.error = e.what();
+  }
+  r.wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  r.sim_time = sim.time(), r.steps = sim.step_count();
+  r.ice = sim.ice_count(), r.removed = sim.removed_total(), r.fluid_end = sim.fluid_count();
+
+  const io::ParticleFrame f = sim.Snapshot(1);
+  if (frames) io::WriteParticleFrame(out / fmt::format("{}_{}.h5part", which, method), f);
+  const auto x = f.GetPositions<double>();
+  const auto& phase = f.Get<std::uint8_t>("phase");
+  std::vector<Vec3d> ice, solid, sphere_solid;
+  const auto& object = f.Get<std::uint32_t>("object_id");
+  for (std::size_t i = 0; i < x.size(); ++i) {
+    if (!std::isfinite(x[i].x) || !std::isfinite(x[i].y) || !std::isfinite(x[i].z)) r.finite = false;
+    if (phase[i] == std::uint8_t(io::Phase::kFluid)) r.fluid.push_back(x[i]);
+    if (phase[i] == std::uint8_t(io::Phase::kIce)) ice.push_back(x[i]);
+    if (phase[i] == std::uint8_t(io::Phase::kBoundary)) {
+      solid.push_back(x[i]);
+      if (object[i] == 1) sphere_solid.push_back(x[i]);
+    }
+  }
+  if (std::int64_t(ice.size()) != r.ice) r.ok = false, r.error += fmt::format(" frame has {} ice, ice_count() {}", ice.size(), r.ice);
+  r.solid = solid;
+
+  // Specks: connected components of ice with links up to 1.5 d_p; a component is attached when
+  // one of its particles lies within 1.5 d_p of a solid boundary particle (water freezes at
+  // 0.5-1.1 d_p from the wall particles, so attached ice always has one that close).
+  const double link = 1.5 * dp;
+  const Grid ice_grid(ice, link), solid_grid(solid, link), sphere_solid_grid(sphere_solid, link);
+  std::vector<int> comp(ice.size(), -1);
+  std::vector<int> stack;
+  for (std::size_t s = 0; s < ice.size(); ++s) {
+    if (comp[s] >= 0) continue;
+    const int c = int(r.ice_components++);
+    std::vector<int> members;
+    bool attached = false, on_sphere = false;
+    comp[s] = c, stack.push_back(int(s));
+    while (!stack.empty()) {
+      const int i = stack.back();
+      stack.pop_back();
+      members.push_back(i);
+      attached = attached || solid_grid.AnyNear(ice[i], link);
+      on_sphere = on_sphere || sphere_solid_grid.AnyNear(ice[i], link);
+      ice_grid.ForNear(ice[i], link, [&](int j) {
+        if (comp[j] < 0) comp[j] = c, stack.push_back(j);
+      });
+    }
+    auto& dest = attached ? r.ice_attached : r.ice_specks;
+    for (int i : members) dest.push_back(ice[i]);
+    if (!attached) ++r.speck_components, r.specks += std::int64_t(members.size());
+    if (members.size() <= kBitSize) r.bits += std::int64_t(members.size());
+    if (on_sphere) r.ice_sphere_attached += std::int64_t(members.size());
+    else if (attached) r.ice_ground_only += std::int64_t(members.size());
+  }
+
+  // Water lost to splashing: removed by the domain, or at the end farther than 3 d_p from every
+  // solid and ice particle (in the air). Off the object: farther than 3 d_p from the sphere and
+  // its ice (on the ground or in the air): water that did not stay on the object.
+  std::vector<Vec3d> near_all = solid;
+  near_all.insert(near_all.end(), ice.begin(), ice.end());
+  std::vector<Vec3d> near_sphere = sphere_solid;
+  for (const Vec3d& p : ice)
+    if (Norm(p - kSphereCenter) < kSphereRadius + 6 * dp) near_sphere.push_back(p);
+  const double far = 3 * dp;
+  const Grid all_grid(near_all, far), sphere_grid(near_sphere, far);
+  for (const Vec3d& p : r.fluid) {
+    if (!all_grid.AnyNear(p, far)) ++r.airborne;
+    if (!sphere_grid.AnyNear(p, far)) ++r.off_object;
+  }
+  MeasureRoughness(r.ice_attached, dp, r);
+  return r;
+}
+
+// ---- Pictures: orthographic point views written as PNG (stored deflate blocks, no zlib needed).
+
+std::uint32_t Crc32(const std::uint8_t* data, std::size_t n, std::uint32_t crc = 0) {
+  static std::array<std::uint32_t, 256> table = [] {
+    std::array<std::uint32_t, 256> t{};
+    for (std::uint32_t i = 0; i < 256; ++i) {
+      std::uint32_t c = i;
+      for (int k = 0; k < 8; ++k) c = c & 1 ? 0xEDB88320u ^ (c >> 1) : c >> 1;
+      t[i] = c;
+    }
+    return t;
+  }();
+  crc = ~crc;
+  for (std::size_t i = 0; i < n; ++i) crc = table[(crc ^ data[i]) & 0xFF] ^ (crc >> 8);
+  return ~crc;
+}
+
+void WritePng(const fs::path& path, int w, int h, const std::vector<std::uint8_t>& rgb) {
+  std::vector<std::uint8_t> raw;  // filter byte 0 per row
+  for (int y = 0; y < h; ++y) {
+    raw.push_back(0);
+    raw.insert(raw.end(), rgb.begin() + std::ptrdiff_t(y) * w * 3, rgb.begin() + std::ptrdiff_t(y + 1) * w * 3);
+  }
+  std::vector<std::uint8_t> z{0x78, 0x01};
+  std::uint32_t a = 1, b = 0;
+  for (std::uint8_t v : raw) a = (a + v) % 65521, b = (b + a) % 65521;
+  for (std::size_t pos = 0; pos < raw.size() || pos == 0;) {
+    const std::size_t len = std::min<std::size_t>(65535, raw.size() - pos);
+    const bool last = pos + len == raw.size();
+    z.push_back(last ? 1 : 0);
+    z.push_back(len & 0xFF), z.push_back(len >> 8), z.push_back(~len & 0xFF), z.push_back((~len >> 8) & 0xFF);
+    z.insert(z.end(), raw.begin() + std::ptrdiff_t(pos), raw.begin() + std::ptrdiff_t(pos + len));
+    pos += len;
+    if (last) break;
+  }
+  const std::uint32_t adler = (b << 16) | a;
+  for (int s = 24; s >= 0; s -= 8) z.push_back((adler >> s) & 0xFF);
+  std::ofstream o(path, std::ios::binary);
+  auto be32 = [&](std::uint32_t v) {
+    for (int s = 24; s >= 0; s -= 8) o.put(char((v >> s) & 0xFF));
+  };
+  auto chunk = [&](const char* type, const std::vector<std::uint8_t>& data) {
+    be32(std::uint32_t(data.size()));
+    std::vector<std::uint8_t> td(type, type + 4);
+    td.insert(td.end(), data.begin(), data.end());
+    o.write(reinterpret_cast<const char*>(td.data()), std::streamsize(td.size()));
+    be32(Crc32(td.data(), td.size()));
+  };
+  o.write("\x89PNG\r\n\x1a\n", 8);
+  std::vector<std::uint8_t> ihdr;
+  for (int v : {w, h})
+    for (int s = 24; s >= 0; s -= 8) ihdr.push_back((v >> s) & 0xFF);
+  ihdr.insert(ihdr.end(), {8, 2, 0, 0, 0});
+  chunk("IHDR", ihdr);
+  chunk("IDAT", z);
+  chunk("IEND", {});
+}
+
+// Top view (x right, y up) and side view (x right, z up) side by side, 1.6 m x 1.6 m each.
+// Grey: solids; light blue: water; dark blue: ice attached to a solid; red: specks.
+void Picture(const Result& r, const fs::path& path) {
+  constexpr int kPanel = 480, kH = kPanel, kW = 2 * kPanel + 10;
+  std::vector<std::uint8_t> img(std::size_t(kW) * kH * 3, 255);
+  const double scale = kPanel / 1.6;
+  auto put = [&](double u, double v, int ox, std::array<std::uint8_t, 3> c, int rad) {  // u, v in [-0.8, 0.8] m
+    const int px = ox + int((u + 0.8) * scale), py = kH - 1 - int((v + 0.8) * scale);
+    for (int dy = -rad; dy <= rad; ++dy)
+      for (int dx = -rad; dx <= rad; ++dx) {
+        const int X = px + dx, Y = py + dy;
+        if (X < ox || X >= ox + kPanel || Y < 0 || Y >= kH || dx * dx + dy * dy > rad * rad + 1) continue;
+        std::memcpy(&img[(std::size_t(Y) * kW + X) * 3], c.data(), 3);
+      }
+  };
+  auto layer = [&](const std::vector<Vec3d>& p, std::array<std::uint8_t, 3> c, int rad, bool side) {
+    for (const Vec3d& q : p) {
+      if (side && std::fabs(q.y) > 0.1) continue;  // side view: a 20 cm slab through the sphere's centre
+      if (!side && q.z < 0.01 && c[0] == 200) continue;  // top view: leave the ground out
+      put(q.x, side ? q.z - 0.7 : q.y, side ? kPanel + 10 : 0, c, rad);  // side: z from -0.1 m up
+    }
+  };
+  for (bool side : {false, true}) {
+    layer(r.solid, {200, 200, 200}, 0, side);
+    layer(r.fluid, {150, 200, 255}, 1, side);
+    layer(r.ice_attached, {20, 40, 160}, 2, side);
+    layer(r.ice_specks, {220, 20, 20}, 2, side);
+  }
+  for (int y = 0; y < kH; ++y)
+    for (int x = kPanel; x < kPanel + 10; ++x) img[(std::size_t(y) * kW + x) * 3] = img[(std::size_t(y) * kW + x) * 3 + 1] = img[(std::size_t(y) * kW + x) * 3 + 2] = 0;
+  WritePng(path, kW, kH, img);
+}
+
+std::string LoadAverage() {
+  std::ifstream f("/proc/loadavg");
+  std::string a, b, c;
+  f >> a >> b >> c;
+  return a + " " + b + " " + c;
+}
+
+}  // namespace
+}  // namespace rime::compare
+
+int main(int argc, char** argv) {
+  using namespace rime::compare;
+  bool full = false, frames = false;
+  fs::path out = "results";
+  std::vector<std::string> scenes{"drop", "throw"};
+  for (int i = 1; i < argc; ++i) {
+    if (!std::strcmp(argv[i], "--full")) full = true;
+    else if (!std::strcmp(argv[i], "--frames")) frames = true;
+    else if (!std::strcmp(argv[i], "--out") && i + 1 < argc) out = argv[++i];
+    else if (!std::strcmp(argv[i], "--scene") && i + 1 < argc) scenes = {argv[++i]};
+    else {
+      std::printf("usage: rime-compare-im2013 [--full] [--out DIR] [--scene drop|throw] [--frames]\n");
+      return std::strcmp(argv[i], "--help") ? 2 : 0;
+    }
+  }
+  rime::log::SetLevel(rime::log::Level::kWarning);
+  fs::create_directories(out);
+  const std::string run_info = fmt::format("{} variant; {} hardware threads; load average at start {}", full ? "full" : "fast",
+                                           std::thread::hardware_concurrency(), LoadAverage());
+  std::printf("Rime vs Im et al. 2013 baseline (%s)\n", run_info.c_str());
+  std::vector<Result> results;
+  for (const std::string& s : scenes)
+    for (const char* m : {"rime", "im2013"}) {
+      results.push_back(Run(s, m, full, out, frames));
+      Picture(results.back(), out / fmt::format("{}_{}.png", s, m));
+      std::printf("  %s/%s done in %.0f s\n", s.c_str(), m, results.back().wall_s);
+      std::fflush(stdout);
+    }
+  std::printf("\n%-6s %-7s %6s %6s %7s %7s %7s %7s %7s %7s %7s %7s %7s %7s %6s\n", "scene", "method", "water", "ice", "on", "ground",
+              "bits", "specks", "speck", "removed", "airborn", "off-obj", "rough", "thick", "wall");
+  std::printf("%-6s %-7s %6s %6s %7s %7s %7s %7s %7s %7s %7s %7s %7s %7s %6s\n", "", "", "start", "", "sphere", "only", "<=3", "(ptcl)", "groups", "",
+              "", "", "mm", "mm", "s");
+  std::ofstream csv(out / "results.csv");
+  csv << "scene,method,ok,water_initial,ice,ice_components,speck_components,specks,ice_sphere_attached,ice_ground_only,bits,removed,airborne,off_object,fluid_end,"
+         "ice_on_sphere,covered_bins,bins,roughness_mm,mean_thickness_mm,max_average_density_error,steps,wall_s\n";
+  std::string json = fmt::format("{{\n  \"run\": \"{}\",\n  \"results\": [\n", run_info);
+  for (std::size_t k = 0; k < results.size(); ++k) {
+    const Result& r = results[k];
+    std::printf("%-6s %-7s %6lld %6lld %7lld %7lld %7lld %7lld %7lld %7lld %7lld %7lld %7.1f %7.1f %6.0f%s\n", r.scene.c_str(), r.method.c_str(),
+                (long long)r.water_initial, (long long)r.ice, (long long)r.ice_sphere_attached, (long long)r.ice_ground_only,
+                (long long)r.bits, (long long)r.specks, (long long)r.speck_components, (long long)r.removed, (long long)r.airborne, (long long)r.off_object,
+                r.roughness_mm, r.mean_thickness_mm, r.wall_s,
+                r.ok ? "" : "  FAILED");
+    csv << fmt::format("{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.3f},{:.3f},{:.5f},{},{:.1f}\n", r.scene, r.method, r.ok,
+                       r.water_initial, r.ice, r.ice_components, r.speck_components, r.specks, r.ice_sphere_attached, r.ice_ground_only,
+                       r.bits, r.removed, r.airborne, r.off_object,
+                       r.fluid_end, r.ice_on_sphere, r.covered_bins, r.bins, r.roughness_mm, r.mean_thickness_mm,
+                       r.max_average_density_error, r.steps, r.wall_s);
+    json += fmt::format(
+        "    {{\"scene\": \"{}\", \"method\": \"{}\", \"ok\": {}, \"error\": \"{}\", \"simulated_s\": {:.4f}, \"water_initial\": {}, "
+        "\"ice\": {}, \"ice_components\": {}, \"speck_components\": {}, \"specks\": {}, \"ice_sphere_attached\": {}, \"ice_ground_only\": {}, \"bits\": {}, \"removed\": {}, \"airborne\": {}, "
+        "\"off_object\": {}, \"fluid_end\": {}, \"ice_on_sphere\": {}, \"covered_bins\": {}, \"bins\": {}, \"roughness_mm\": {:.3f}, "
+        "\"mean_thickness_mm\": {:.3f}, \"max_average_density_error\": {:.5f}, \"finite\": {}, \"steps\": {}, \"wall_s\": {:.1f}}}{}\n",
+        r.scene, r.method, r.ok, r.error, r.sim_time, r.water_initial, r.ice, r.ice_components, r.speck_components, r.specks, r.ice_sphere_attached,
+        r.ice_ground_only, r.bits, r.removed, r.airborne, r.off_object, r.fluid_end, r.ice_on_sphere, r.covered_bins, r.bins, r.roughness_mm, r.mean_thickness_mm,
+        r.max_average_density_error, r.finite, r.steps, r.wall_s, k + 1 < results.size() ? "," : "");
+  }
+  json += "  ]\n}\n";
+  std::ofstream(out / "results.json") << json;
+  bool ok = true;
+  for (const Result& r : results) ok = ok && r.ok && r.finite && r.ice + r.fluid_end + r.removed == r.water_initial;
+  std::printf("\nload average at end %s; %s\n", LoadAverage().c_str(),
+              ok ? "every run finished, finite, water + ice + removed = initial water" : "SOME RUN FAILED (see above)");
+  return ok ? 0 : 1;
+}
