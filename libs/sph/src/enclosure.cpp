@@ -5,25 +5,30 @@
 
 namespace rime::sph {
 
+template <class F>
+void Enclosure::ForEachFaceNeighbor(std::int64_t c, F f) const {
+  const std::int64_t strides[3] = {1, nx_, nx_ * ny_}, size[3] = {nx_, ny_, nz_};
+  const std::int64_t coord[3] = {c % nx_, (c / nx_) % ny_, c / (nx_ * ny_)};
+  for (int axis = 0; axis < 3; ++axis)
+    for (int step : {-1, 1}) {
+      const std::int64_t k = coord[axis] + step;
+      if (k >= 0 && k < size[axis]) f(c + step * strides[axis]);
+    }
+}
+
 template <class Visit>
 void Enclosure::Fill(std::int64_t seed, std::uint8_t from, std::uint8_t to, Visit visit) {
   std::vector<std::int64_t> stack{seed};
   state_[std::size_t(seed)] = to;
-  const std::int64_t strides[3] = {1, nx_, nx_ * ny_}, size[3] = {nx_, ny_, nz_};
   while (!stack.empty()) {
     const std::int64_t c = stack.back();
     stack.pop_back();
     visit(c);
-    const std::int64_t coord[3] = {c % nx_, (c / nx_) % ny_, c / (nx_ * ny_)};
-    for (int axis = 0; axis < 3; ++axis)
-      for (int step : {-1, 1}) {
-        const std::int64_t k = coord[axis] + step;
-        if (k < 0 || k >= size[axis]) continue;
-        const std::int64_t n = c + step * strides[axis];
-        if (state_[std::size_t(n)] != from) continue;
-        state_[std::size_t(n)] = to;
-        stack.push_back(n);
-      }
+    ForEachFaceNeighbor(c, [&](std::int64_t n) {
+      if (state_[std::size_t(n)] != from) return;
+      state_[std::size_t(n)] = to;
+      stack.push_back(n);
+    });
   }
 }
 
@@ -55,19 +60,12 @@ Enclosure::Enclosure(const std::vector<Vec3d>& boundary, const std::vector<Vec3d
       Fill(c, kEnclosed, kTank, [&](std::int64_t cell) { region[std::size_t(cell)] = r; });
     }
   std::vector<double> vote(std::size_t(regions), 0.0);
-  const std::int64_t strides[3] = {1, nx_, nx_ * ny_}, size[3] = {nx_, ny_, nz_};
   for (std::size_t b = 0; b < boundary.size(); ++b) {
     if (Dot(normals[b], normals[b]) == 0) continue;
-    const std::int64_t c = Cell(boundary[b]);
-    const std::int64_t coord[3] = {c % nx_, (c / nx_) % ny_, c / (nx_ * ny_)};
-    for (int axis = 0; axis < 3; ++axis)
-      for (int step : {-1, 1}) {
-        const std::int64_t k = coord[axis] + step;
-        if (k < 0 || k >= size[axis]) continue;
-        const std::int64_t n = c + step * strides[axis];
-        const std::int32_t r = region[std::size_t(n)];
-        if (r >= 0) vote[std::size_t(r)] += Dot(normals[b], CellCenter(n) - boundary[b]) > 0 ? 1 : -1;
-      }
+    ForEachFaceNeighbor(Cell(boundary[b]), [&](std::int64_t n) {
+      const std::int32_t r = region[std::size_t(n)];
+      if (r >= 0) vote[std::size_t(r)] += Dot(normals[b], CellCenter(n) - boundary[b]) > 0 ? 1 : -1;
+    });
   }
   enclosed_ = 0;
   for (std::size_t c = 0; c < state_.size(); ++c)

@@ -32,6 +32,8 @@ class Enclosure {
   enum : std::uint8_t { kEnclosed = 0, kWall = 1, kOutside = 2, kTank = 3 };
   std::int64_t Cell(const Vec3d& p) const;
   Vec3d CellCenter(std::int64_t c) const;
+  template <class F>
+  void ForEachFaceNeighbor(std::int64_t c, F f) const;  // the up to 6 cells sharing a face with c
   // 6-connected fill from `seed` through cells in state `from`, setting them to `to`; calls
   // visit(cell) for each.
   template <class Visit>
