@@ -8,7 +8,9 @@
 // through other ice); water lost to splashing; roughness of the ice on the sphere. Prints a table,
 // writes results.json / results.csv and top/side PNG views of the final particles.
 //
-// Usage: rime-compare-im2013 [--full] [--out DIR] [--scene drop|throw] [--frames]
+// Usage: rime-compare-im2013 [--full] [--out DIR] [--scene drop|throw] [--frames] [--ablation]
+//   --ablation adds rime with one switch of the im2013 preset each: isotropic growth (rime+iso),
+//   Akinci 2013 surface tension (rime+ak13), no wall stickiness (rime-wall).
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -21,6 +23,10 @@
 #include <thread>
 #include <unordered_map>
 #include <vector>
+
+#ifdef RIME_HAVE_ZLIB
+#include <zlib.h>
+#endif
 
 #include "rime/boundary/object.h"
 #include "rime/core/error.h"
@@ -40,7 +46,23 @@ constexpr std::size_t kBitSize = 3;
 const Vec3d kSphereCenter{0, 0, 0.35};
 
 // Both scenes share the ground, the sphere and the freezing thresholds of examples/default.toml.
-std::string SceneText(const std::string& which, const std::string& method, bool full) {
+// One run: a method preset plus, for the ablation, single switches of the im2013 preset on top of "rime".
+struct Variant {
+  std::string label, method;
+  std::string freezing, surface_tension, viscosity;  // extra TOML lines for those tables
+};
+
+const std::vector<Variant>& Variants(bool ablation) {
+  static const std::vector<Variant> pair{{"rime", "rime", "", "", ""}, {"im2013", "im2013", "", "", ""}};
+  static const std::vector<Variant> all{pair[0],
+                                        pair[1],
+                                        {"rime+iso", "rime", "growth = \"isotropic\"\n", "", ""},
+                                        {"rime+ak13", "rime", "", "model = \"akinci2013\"\n", ""},
+                                        {"rime-wall", "rime", "", "", "wall_beta0 = 0.0\n"}};
+  return ablation ? all : pair;
+}
+
+std::string SceneText(const std::string& which, const Variant& v, bool full) {
   const double dp = full ? 0.0125 : 0.02;
   const double end = full ? 1.5 : 1.0;
   std::string water;
@@ -65,7 +87,11 @@ modules = ["gravity", "viscosity", "surface_tension", "freezing"]
 [freezing]
 glaze_threshold = 0.05
 icicle_threshold = 0.01
-
+{9}
+[surface_tension]
+{10}
+[viscosity]
+{11}
 [domain]
 min = [-0.8, -0.8, -0.05]
 max = [0.8, 0.8, 1.0]
@@ -82,7 +108,8 @@ radius = {4}
 translate = [{5}, {6}, {7}]
 
 {8})",
-                     which, end, method, dp, kSphereRadius, kSphereCenter.x, kSphereCenter.y, kSphereCenter.z, water);
+                     which, end, v.method, dp, kSphereRadius, kSphereCenter.x, kSphereCenter.y, kSphereCenter.z, water, v.freezing,
+                     v.surface_tension, v.viscosity);
 }
 
 // Uniform hash grid over points, for fixed-radius queries (radius <= cell).
@@ -186,10 +213,10 @@ void MeasureRoughness(const std::vector<Vec3d>& ice, double dp, Result& r) {
   r.mean_thickness_mm = covered ? 1e3 * thickness / covered : 0;
 }
 
-Result Run(const std::string& which, const std::string& method, bool full, const fs::path& out, bool frames) {
+Result Run(const std::string& which, const Variant& v, bool full, const fs::path& out, bool frames) {
   Result r;
-  r.scene = which, r.method = method;
-  const io::Scene scene = io::ParseScene(SceneText(which, method, full), "compare_" + which + ".toml");
+  r.scene = which, r.method = v.label;
+  const io::Scene scene = io::ParseScene(SceneText(which, v, full), "compare_" + which + ".toml");
   const double dp = scene.fluid.spacing;
   sph::Simulation<float> sim(scene, exec::Device::Cpu());
   for (std::size_t k = 0; k < scene.solids.size(); ++k) {
@@ -216,7 +243,7 @@ Result Run(const std::string& which, const std::string& method, bool full, const
   r.ice = sim.ice_count(), r.removed = sim.removed_total(), r.fluid_end = sim.fluid_count();
 
   const io::ParticleFrame f = sim.Snapshot(1);
-  if (frames) io::WriteParticleFrame(out / fmt::format("{}_{}.h5part", which, method), f);
+  if (frames) io::WriteParticleFrame(out / fmt::format("{}_{}.h5part", which, v.label), f);
   const auto x = f.GetPositions<double>();
   const auto& phase = f.Get<std::uint8_t>("phase");
   std::vector<Vec3d> ice, solid, sphere_solid;
@@ -282,7 +309,7 @@ Result Run(const std::string& which, const std::string& method, bool full, const
   return r;
 }
 
-// ---- Pictures: orthographic point views written as PNG (stored deflate blocks, no zlib needed).
+// ---- Pictures: orthographic point views written as PNG (deflated with zlib when it was found).
 
 std::uint32_t Crc32(const std::uint8_t* data, std::size_t n, std::uint32_t crc = 0) {
   static std::array<std::uint32_t, 256> table = [] {
@@ -305,6 +332,13 @@ void WritePng(const fs::path& path, int w, int h, const std::vector<std::uint8_t
     raw.push_back(0);
     raw.insert(raw.end(), rgb.begin() + std::ptrdiff_t(y) * w * 3, rgb.begin() + std::ptrdiff_t(y + 1) * w * 3);
   }
+#ifdef RIME_HAVE_ZLIB
+  uLongf size = compressBound(uLong(raw.size()));
+  std::vector<std::uint8_t> z(size);
+  compress2(z.data(), &size, raw.data(), uLong(raw.size()), 9);
+  z.resize(size);
+#else
+  // Without zlib: stored (uncompressed) deflate blocks, about 1.4 MB a picture.
   std::vector<std::uint8_t> z{0x78, 0x01};
   std::uint32_t a = 1, b = 0;
   for (std::uint8_t v : raw) a = (a + v) % 65521, b = (b + a) % 65521;
@@ -319,6 +353,7 @@ void WritePng(const fs::path& path, int w, int h, const std::vector<std::uint8_t
   }
   const std::uint32_t adler = (b << 16) | a;
   for (int s = 24; s >= 0; s -= 8) z.push_back((adler >> s) & 0xFF);
+#endif
   std::ofstream o(path, std::ios::binary);
   auto be32 = [&](std::uint32_t v) {
     for (int s = 24; s >= 0; s -= 8) o.put(char((v >> s) & 0xFF));
@@ -385,16 +420,17 @@ std::string LoadAverage() {
 
 int main(int argc, char** argv) {
   using namespace rime::compare;
-  bool full = false, frames = false;
+  bool full = false, frames = false, ablation = false;
   fs::path out = "results";
   std::vector<std::string> scenes{"drop", "throw"};
   for (int i = 1; i < argc; ++i) {
     if (!std::strcmp(argv[i], "--full")) full = true;
     else if (!std::strcmp(argv[i], "--frames")) frames = true;
+    else if (!std::strcmp(argv[i], "--ablation")) ablation = true;
     else if (!std::strcmp(argv[i], "--out") && i + 1 < argc) out = argv[++i];
     else if (!std::strcmp(argv[i], "--scene") && i + 1 < argc) scenes = {argv[++i]};
     else {
-      std::printf("usage: rime-compare-im2013 [--full] [--out DIR] [--scene drop|throw] [--frames]\n");
+      std::printf("usage: rime-compare-im2013 [--full] [--out DIR] [--scene drop|throw] [--frames] [--ablation]\n");
       return std::strcmp(argv[i], "--help") ? 2 : 0;
     }
   }
@@ -405,15 +441,15 @@ int main(int argc, char** argv) {
   std::printf("Rime vs Im et al. 2013 baseline (%s)\n", run_info.c_str());
   std::vector<Result> results;
   for (const std::string& s : scenes)
-    for (const char* m : {"rime", "im2013"}) {
-      results.push_back(Run(s, m, full, out, frames));
-      Picture(results.back(), out / fmt::format("{}_{}.png", s, m));
-      std::printf("  %s/%s done in %.0f s\n", s.c_str(), m, results.back().wall_s);
+    for (const Variant& v : Variants(ablation)) {
+      results.push_back(Run(s, v, full, out, frames));
+      Picture(results.back(), out / fmt::format("{}_{}.png", s, v.label));
+      std::printf("  %s/%s done in %.0f s\n", s.c_str(), v.label.c_str(), results.back().wall_s);
       std::fflush(stdout);
     }
-  std::printf("\n%-6s %-7s %6s %6s %7s %7s %7s %7s %7s %7s %7s %7s %7s %7s %6s\n", "scene", "method", "water", "ice", "on", "ground",
+  std::printf("\n%-6s %-9s %6s %6s %7s %7s %7s %7s %7s %7s %7s %7s %7s %7s %6s\n", "scene", "method", "water", "ice", "on", "ground",
               "bits", "specks", "speck", "removed", "airborn", "off-obj", "rough", "thick", "wall");
-  std::printf("%-6s %-7s %6s %6s %7s %7s %7s %7s %7s %7s %7s %7s %7s %7s %6s\n", "", "", "start", "", "sphere", "only", "<=3", "(ptcl)", "groups", "",
+  std::printf("%-6s %-9s %6s %6s %7s %7s %7s %7s %7s %7s %7s %7s %7s %7s %6s\n", "", "", "start", "", "sphere", "only", "<=3", "(ptcl)", "groups", "",
               "", "", "mm", "mm", "s");
   std::ofstream csv(out / "results.csv");
   csv << "scene,method,ok,water_initial,ice,ice_components,speck_components,specks,ice_sphere_attached,ice_ground_only,bits,removed,airborne,off_object,fluid_end,"
@@ -421,7 +457,7 @@ int main(int argc, char** argv) {
   std::string json = fmt::format("{{\n  \"run\": \"{}\",\n  \"results\": [\n", run_info);
   for (std::size_t k = 0; k < results.size(); ++k) {
     const Result& r = results[k];
-    std::printf("%-6s %-7s %6lld %6lld %7lld %7lld %7lld %7lld %7lld %7lld %7lld %7lld %7.1f %7.1f %6.0f%s\n", r.scene.c_str(), r.method.c_str(),
+    std::printf("%-6s %-9s %6lld %6lld %7lld %7lld %7lld %7lld %7lld %7lld %7lld %7lld %7.1f %7.1f %6.0f%s\n", r.scene.c_str(), r.method.c_str(),
                 (long long)r.water_initial, (long long)r.ice, (long long)r.ice_sphere_attached, (long long)r.ice_ground_only,
                 (long long)r.bits, (long long)r.specks, (long long)r.speck_components, (long long)r.removed, (long long)r.airborne, (long long)r.off_object,
                 r.roughness_mm, r.mean_thickness_mm, r.wall_s,
