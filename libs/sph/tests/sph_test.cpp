@@ -204,6 +204,19 @@ TEST(Iisph, PairwiseModulesConserveMomentum) {
   check("pressure");
 }
 
+// Akinci 2013's adhesion spline vanishes at both ends of (H/2, H]; rounding there must give 0, not
+// NaN from a negative fourth root, and it is positive inside.
+TEST(Iisph, AkinciAdhesionIsFiniteAtTheEndsOfItsRange) {
+  for (float H : {0.02f, 0.0264f, 0.04f, 1.0f}) {
+    for (float r : {0.5f * H, std::nextafter(0.5f * H, H), std::nextafter(H, 0.0f), H, 0.75f * H}) {
+      const float a = kernels::AkinciAdhesion(r, H);
+      EXPECT_TRUE(std::isfinite(a) && a >= 0) << "H " << H << " r " << r << ": " << a;
+    }
+    EXPECT_GT(kernels::AkinciAdhesion(0.75f * H, H), 0.0f);
+    EXPECT_EQ(kernels::AkinciAdhesion(0.4f * H, H), 0.0f);
+  }
+}
+
 // Surface tension pulls an elongated block of water towards a sphere (no gravity, no solids). The
 // elongation is the ratio of the largest to the smallest principal moment of the particles'
 // gyration tensor, 4 at the start (2:1:1); after 0.6 s (a fifth of the blob's Rayleigh period)

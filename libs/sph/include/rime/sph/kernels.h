@@ -189,7 +189,9 @@ template <class T>
 RIME_HDI T AkinciAdhesion(T r, T H) {
   if (T(2) * r <= H || r > H) return T(0);
   using std::pow;
-  return T(0.007) / pow(H, T(3.25)) * pow(-T(4) * r * r / H + T(6) * r - T(2) * H, T(0.25));
+  // The bracket vanishes at both ends of the range; rounding there must not make it negative (NaN).
+  const T bracket = -T(4) * r * r / H + T(6) * r - T(2) * H;
+  return bracket > T(0) ? T(0.007) / pow(H, T(3.25)) * pow(bracket, T(0.25)) : T(0);
 }
 
 /// Akinci 2013 surface normal n_i = H Σ_j (m/ρ_j) ∇W_ij (the Im et al. 2013 baseline's surface tension).
