@@ -194,6 +194,14 @@ RIME_HDI T AkinciAdhesion(T r, T H) {
   return bracket > T(0) ? T(0.007) / pow(H, T(3.25)) * pow(bracket, T(0.25)) : T(0);
 }
 
+/// Σ_j V_j ∇W_ij over i's water neighbours, V_j = m/ρ_j.
+template <class T>
+RIME_HDI Vec3<T> WaterGradientSum(const Pairs<T>& ff, Index i, const T* density, T mass) {
+  Vec3<T> s{};
+  for (std::uint32_t k = ff.offsets[i], e = ff.offsets[i + 1]; k < e; ++k) s += ff.grad[k] * (mass / density[ff.index[k]]);
+  return s;
+}
+
 /// Akinci 2013 surface normal n_i = H Σ_j (m/ρ_j) ∇W_ij (the Im et al. 2013 baseline's surface tension).
 template <class T>
 struct AkinciNormal {
@@ -201,11 +209,7 @@ struct AkinciNormal {
   const T* density;
   T mass, support;
   Vec3<T>* normal;
-  RIME_HD void operator()(Index i) const {
-    Vec3<T> n{};
-    for (std::uint32_t k = ff.offsets[i], e = ff.offsets[i + 1]; k < e; ++k) n += ff.grad[k] * (mass / density[ff.index[k]]);
-    normal[i] = n * support;
-  }
+  RIME_HD void operator()(Index i) const { normal[i] = WaterGradientSum(ff, i, density, mass) * support; }
 };
 
 /// Akinci 2013 surface tension and adhesion per unit mass:
@@ -253,8 +257,7 @@ struct AirPressureAcceleration {
   T mass, p_atm;
   Vec3<T>* accel;
   RIME_HD void operator()(Index i) const {
-    Vec3<T> s{};
-    for (std::uint32_t k = ff.offsets[i], e = ff.offsets[i + 1]; k < e; ++k) s += ff.grad[k] * (mass / density[ff.index[k]]);
+    Vec3<T> s = WaterGradientSum(ff, i, density, mass);
     for (std::uint32_t k = fb.offsets[i], e = fb.offsets[i + 1]; k < e; ++k) s += fb.grad[k] * boundary_volume[fb.index[k]];
     accel[i] += s * (p_atm / density[i]);
   }
