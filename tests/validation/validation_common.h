@@ -19,6 +19,8 @@ namespace rime::validation {
 struct Options {
   bool full = false;       // the variant a user runs for the figures (minutes); CI runs the fast one
   bool viscosity = false;  // dam break only: also switch on the spec's default viscosity modules
+  bool cfl = false;        // hydrostatic only: the spec §7 default adaptive step instead of fixed 2 ms
+  bool trace = false;      // print every step's solver figures
 };
 
 /// `--full` or RIME_VALIDATION_FULL=1 selects the full variant; `--help` prints `usage` and exits.
@@ -32,6 +34,10 @@ inline Options ParseOptions(int argc, char** argv, const char* usage) {
       o.full = false;
     } else if (!std::strcmp(argv[i], "--viscosity")) {
       o.viscosity = true;
+    } else if (!std::strcmp(argv[i], "--cfl")) {
+      o.cfl = true;
+    } else if (!std::strcmp(argv[i], "--trace")) {
+      o.trace = true;
     } else {
       std::printf("%s\n", usage);
       std::exit(std::strcmp(argv[i], "--help") && std::strcmp(argv[i], "-h") ? 2 : 0);

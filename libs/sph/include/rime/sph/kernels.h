@@ -445,6 +445,20 @@ struct Scale {
   RIME_HD void operator()(Index i) const { out[i] = factor * in[i]; }
 };
 
+/// out[i] = x_i·u and out[n + i] = −x_i·u: the fluid's extent along u from two maxima.
+template <class T>
+struct Heights {
+  const Vec3<T>* x;
+  Vec3<T> up;
+  Index n;
+  T* out;
+  RIME_HD void operator()(Index i) const {
+    const T z = Dot(x[i], up);
+    out[i] = z;
+    out[n + i] = -z;
+  }
+};
+
 /// out[i] = ‖v_i‖² (for the CFL condition and the divergence check).
 template <class T>
 struct SquaredSpeed {
@@ -523,7 +537,7 @@ struct CompactionOrder {
   X(rime::sph::kernels::AirPressureAcceleration<T>) X(rime::sph::kernels::AdvectVelocity<T>)                       \
   X(rime::sph::kernels::PredictAdvection<T>) X(rime::sph::kernels::DisplacementSum<T>)                             \
   X(rime::sph::kernels::PressureUpdate<T>) X(rime::sph::kernels::IntegratePressure<T>)                             \
-  X(rime::sph::kernels::SquaredSpeed<T>) X(rime::sph::kernels::Scale<T>) X(rime::sph::kernels::MoveBoundary<T>) X(rime::sph::kernels::InsideDomain<T>) \
+  X(rime::sph::kernels::SquaredSpeed<T>) X(rime::sph::kernels::Heights<T>) X(rime::sph::kernels::Scale<T>) X(rime::sph::kernels::MoveBoundary<T>) X(rime::sph::kernels::InsideDomain<T>) \
   X(rime::sph::kernels::Gather<T>) X(rime::sph::kernels::Gather<rime::Vec3<T>>) X(rime::sph::kernels::Gather<rime::freeze::Sym6<T>>)
 
 #define RIME_SPH_KERNELS(X)                                                                        \
