@@ -2,9 +2,13 @@
 // particles across the channel depth) swept over the knobs users turn, one at a time around the
 // production defaults, plus the quality presets. Every setting records cost (wall and CPU time,
 // steps, pressure iterations, peak RSS) and error (density error, volume drift, surge-front
-// position and front particle positions against a reference run). Prints a table, writes CSV and
-// JSON, and plots error against cost with gnuplot when it is installed.
-//   rime-bench-accuracy [--repeats R] [--end T] [--out DIR] [--only GROUP] [--no-freezing] [--no-plots]
+// position and front particle positions against a reference run, and the pressure slope of a
+// hydrostatic column run with the same knobs). The same dam break in a cold tank compares the
+// presets' ice (count, and shape as the mean nearest distance to the reference run's ice), and the
+// reference run's ice is surfaced at several voxel sizes (cost, distance from the finest surface).
+// Prints tables, writes CSV and JSON, and plots error against cost with gnuplot when installed.
+//   rime-bench-accuracy [--repeats R] [--end T] [--out DIR] [--only GROUP] [--no-freezing]
+//                       [--no-hydrostatic] [--no-surface] [--no-plots]
 // Each run is a child process (fork) so that its peak RSS and CPU time are its own (wait4).
 #include <sys/resource.h>
 #include <sys/wait.h>
@@ -27,8 +31,14 @@
 
 #include "rime/core/error.h"
 #include "rime/exec/device.h"
+#include "rime/io/particles.h"
 #include "rime/sph/simulation.h"
 #include "../../../libs/sph/tests/test_scenes.h"
+#include "../../validation/validation_common.h"
+#if RIME_ACCURACY_SURFACE
+#include "rime/surface/frame_input.h"
+#include "rime/surface/reconstruct.h"
+#endif
 
 using namespace rime;
 using nlohmann::json;
@@ -45,6 +55,8 @@ struct Setting {
   io::Scene scene;
   int per_a = kBasePerA;
   bool freezing = false;
+  std::string snapshot;  // freezing reference: where to write its last frame (voxel-size sweep)
+  double voxel_ratio = 0;  // voxel-size sweep: voxel / d_p
 };
 
 // Production defaults, or a preset's knobs taken from the scene parser (one source of truth).
@@ -127,6 +139,16 @@ json RunSim(const Setting& s, double end_time) {
             {"max_density_error", err_max}, {"volume_drift", diverged ? 0.0 : volume() / volume0 - 1}, {"front_z", front},
             {"fluid", sim.fluid_count()}, {"ice", sim.ice_count()}, {"diverged", diverged}, {"failure", failure},
             {"dp", dp}, {"threads", exec::CpuThreads()}};
+  if (s.freezing && !diverged) {
+    const io::ParticleFrame frame = sim.Snapshot(0);
+    const auto& phase = frame.Get<std::uint8_t>("phase");
+    const auto fx = frame.GetPositions<double>();
+    std::vector<std::array<double, 3>> ice;
+    for (std::size_t i = 0; i < fx.size(); ++i)
+      if (phase[i] == std::uint8_t(io::Phase::kIce)) ice.push_back({fx[i].x, fx[i].y, fx[i].z});
+    r["ice_positions"] = ice;
+    if (!s.snapshot.empty()) io::WriteParticleFrame(s.snapshot, frame);  // input of the voxel-size sweep
+  }
   // Final positions by id, for the comparison with the reference run at the same spacing.
   const auto x = sim.Positions();
   const auto ids = sim.Ids();
@@ -136,9 +158,133 @@ json RunSim(const Setting& s, double end_time) {
   return r;
 }
 
+// Hydrostatic column with the setting's solver knobs (0.5 m high, 0.4 a wide per side; d_p from
+// the setting's resolution): settles 1 s, then averages each particle's pressure and height over
+// 0.25 s; fits p(z) over the particles at least 2.5 d_p from the walls, floor and surface.
+// Returns the slope's relative error against −ρ0 g and the fastest particle at the end.
+template <class T>
+json RunHydrostatic(const Setting& s) {
+  const int layers = s.per_a, across = std::max(4, int(std::lround(0.4 * s.per_a)));
+  const double dp = 0.5 / layers;
+  io::Scene scene = sph::test::ColumnScene(dp, across, across, layers, 0);
+  scene.solver = s.scene.solver;
+  scene.fluid.precision = s.scene.fluid.precision;
+  scene.fluid.smoothing_ratio = s.scene.fluid.smoothing_ratio;
+  scene.modules = {"gravity"};
+  const double width = sph::test::BoxWidth(dp, across);
+  sph::Simulation<T> sim(scene, exec::Device::Cpu());
+  sim.AddBoundaryObject(sph::test::BoxBoundary(dp, width, width, 0.6), "box");
+  sim.Initialize();
+  const double settle = 1.0, average = 0.25, rho0 = scene.fluid.rest_density, g = 9.81;
+  std::map<std::int64_t, std::array<double, 3>> sums;  // p, z, count
+  try {
+    while (sim.time() < settle - 1e-9) sim.Step(sim.NextTimeStep(settle));
+    while (sim.time() < settle + average - 1e-9) {
+      sim.Step(sim.NextTimeStep(settle + average));
+      const auto x = sim.Positions();
+      const auto p = sim.Pressures();
+      const auto id = sim.Ids();
+      for (std::size_t i = 0; i < x.size(); ++i) {
+        auto& a = sums[id[i]];
+        a[0] += p[i], a[1] += x[i].z, a[2] += 1;
+      }
+    }
+  } catch (const std::exception& e) {
+    return {{"hydro_diverged", true}, {"hydro_failure", e.what()}};
+  }
+  double top = 0;
+  for (const auto& [id, a] : sums) top = std::max(top, a[1] / a[2]);
+  const auto x_end = sim.Positions();
+  std::map<std::int64_t, Vec3d> final_x;
+  const auto ids = sim.Ids();
+  for (std::size_t i = 0; i < x_end.size(); ++i) final_x[ids[i]] = Vec3d(x_end[i]);
+  std::vector<double> z, p;
+  for (const auto& [id, a] : sums) {
+    const double zi = a[1] / a[2];
+    const Vec3d xi = final_x[id];
+    if (zi < 3.1 * dp || zi > top - 2.5 * dp || xi.x < 2.5 * dp || xi.x > width - 2.5 * dp || xi.y < 2.5 * dp || xi.y > width - 2.5 * dp)
+      continue;
+    z.push_back(zi), p.push_back(a[0] / a[2]);
+  }
+  double max_speed = 0;
+  for (const auto& v : sim.Velocities()) max_speed = std::max(max_speed, double(Norm(v)));
+  const validation::Line fit = validation::FitLine(z, p);
+  return {{"hydro_slope_error", -fit.slope / (rho0 * g) - 1}, {"hydro_max_speed", max_speed}, {"hydro_particles", z.size()}};
+}
+
 // One run in a child process; the parent gets the child's JSON through a pipe and its own
 // rusage (CPU time, peak RSS) from wait4.
-json RunChild(const Setting& s, double end_time, int threads) {
+// Symmetric mean nearest-neighbour distance between two point sets (brute force: a few thousand
+// ice particles each), m; NaN when either is empty.
+double ChamferDistance(const json& a, const json& b) {
+  auto load = [](const json& j) {
+    std::vector<Vec3d> v;
+    for (const auto& p : j) v.push_back({p[0].get<double>(), p[1].get<double>(), p[2].get<double>()});
+    return v;
+  };
+  const std::vector<Vec3d> pa = load(a), pb = load(b);
+  if (pa.empty() || pb.empty()) return NAN;
+  auto mean_nearest = [](const std::vector<Vec3d>& from, const std::vector<Vec3d>& to) {
+    double sum = 0;
+    for (const Vec3d& p : from) {
+      double best = INFINITY;
+      for (const Vec3d& q : to) best = std::min(best, SquaredNorm(p - q));
+      sum += std::sqrt(best);
+    }
+    return sum / double(from.size());
+  };
+  return 0.5 * (mean_nearest(pa, pb) + mean_nearest(pb, pa));
+}
+
+enum class Job { kDamBreak, kHydrostatic, kVoxelSweep };
+
+// Surface reconstruction of the freezing reference's ice (its last frame, default ellipsoid field)
+// at voxel = ratio·d_p: cost, and the distance of its mesh from the finest (ratio kFinestVoxel)
+// level set, sampled at the mesh's vertices, in d_p.
+constexpr double kFinestVoxel = 0.2;
+json RunVoxelSweep(const Setting& s) {
+#if RIME_ACCURACY_SURFACE
+  std::vector<std::string> warnings;
+  const io::ParticleFrame frame = io::ReadParticleFrame(s.snapshot);
+  const surface::ParticleSet ice = surface::SelectPhase(frame, io::Phase::kIce, {}, warnings);
+  surface::Settings settings;
+  settings.voxel_ratio = s.voxel_ratio;
+  const auto t0 = std::chrono::steady_clock::now();
+  const surface::Result coarse = surface::Reconstruct(ice, settings);
+  const double wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  rusage usage{};
+  getrusage(RUSAGE_SELF, &usage);
+  const double cpu_s = usage.ru_utime.tv_sec + usage.ru_stime.tv_sec + 1e-6 * (usage.ru_utime.tv_usec + usage.ru_stime.tv_usec);
+  json r = {{"wall_s", wall_s}, {"surface_cpu_s", cpu_s}, {"surface_peak_rss_mib", usage.ru_maxrss / 1024.0},
+            {"ice", ice.size()}, {"triangles", coarse.stats.triangles}, {"voxel_size", coarse.stats.voxel_size}};
+  settings.voxel_ratio = kFinestVoxel;
+  const surface::Result fine = surface::Reconstruct(ice, settings);
+  std::vector<Vec3d> vertices(coarse.mesh.positions.begin(), coarse.mesh.positions.end());
+  std::vector<double> d;
+  for (const float phi : surface::SampleSurface(fine, vertices)) d.push_back(std::fabs(phi) / ice.spacing);
+  std::sort(d.begin(), d.end());
+  double mean = 0;
+  for (const double x : d) mean += x / double(d.size());
+  r["surface_error_mean_dp"] = d.empty() ? NAN : mean;
+  r["surface_error_p95_dp"] = d.empty() ? NAN : d[d.size() * 95 / 100];
+  return r;
+#else
+  (void)s;
+  return {{"diverged", true}, {"failure", "built without rime_surface"}};
+#endif
+}
+
+json RunJob(Job job, const Setting& s, double end_time) {
+  const bool dbl = s.scene.fluid.precision == "double";
+  switch (job) {
+    case Job::kDamBreak: return dbl ? RunSim<double>(s, end_time) : RunSim<float>(s, end_time);
+    case Job::kHydrostatic: return dbl ? RunHydrostatic<double>(s) : RunHydrostatic<float>(s);
+    case Job::kVoxelSweep: return RunVoxelSweep(s);
+  }
+  return {};
+}
+
+json RunChild(const Setting& s, double end_time, int threads, Job job = Job::kDamBreak) {
   int fd[2];
   if (pipe(fd) != 0) throw std::runtime_error("pipe failed");
   const pid_t pid = fork();
@@ -147,7 +293,7 @@ json RunChild(const Setting& s, double end_time, int threads) {
     json r;
     try {
       exec::SetCpuThreads(threads);
-      r = s.scene.fluid.precision == "double" ? RunSim<double>(s, end_time) : RunSim<float>(s, end_time);
+      r = RunJob(job, s, end_time);
     } catch (const std::exception& e) {
       r = {{"diverged", true}, {"failure", e.what()}};
     }
@@ -192,7 +338,7 @@ std::string LoadAverage() {
 std::vector<Setting> Settings(bool with_freezing) {
   std::vector<Setting> v;
   auto add = [&](std::string group, std::string label, auto edit, int per_a = kBasePerA, std::string quality = "", bool fr = false) {
-    Setting s{group, label, BaseScene(quality, per_a, fr), per_a, fr};
+    Setting s{group, label, BaseScene(quality, per_a, fr), per_a, fr, "", 0.0};
     edit(s.scene);
     v.push_back(s);
   };
@@ -243,7 +389,7 @@ int main(int argc, char** argv) {
   int repeats = 3, threads = 0, freezing_repeats = 1;
   double end_time = 0.4;
   std::string out_dir = "tests/bench/accuracy/results", only;
-  bool no_freezing = false, no_plots = false;
+  bool no_freezing = false, no_plots = false, no_hydrostatic = false, no_surface = false;
   app.add_option("--repeats", repeats, "Runs per setting (median time reported)");
   app.add_option("--end", end_time, "Simulated time, s (front sampled every 0.1 s)");
   app.add_option("-j,--threads", threads, "CPU threads (default all)");
@@ -252,6 +398,8 @@ int main(int argc, char** argv) {
   app.add_option("--freezing-repeats", freezing_repeats, "Runs per freezing setting (slow: the reference takes minutes)");
   app.add_flag("--no-freezing", no_freezing, "Skip the freezing scene");
   app.add_flag("--no-plots", no_plots, "Do not call gnuplot");
+  app.add_flag("--no-hydrostatic", no_hydrostatic, "Skip the hydrostatic column run of each setting");
+  app.add_flag("--no-surface", no_surface, "Skip the reconstruction voxel-size sweep on the freezing reference's ice");
   CLI11_PARSE(app, argc, argv);
   std::filesystem::create_directories(out_dir);
   const std::string load_before = LoadAverage();
@@ -259,6 +407,10 @@ int main(int argc, char** argv) {
   const int used_threads = threads > 0 ? threads : int(hw);
 
   std::vector<Setting> settings = Settings(!no_freezing);
+  const std::string snapshot =
+      (std::filesystem::temp_directory_path() / fmt::format("rime-accuracy-{}-freezing-reference.h5part", getpid())).string();
+  for (Setting& s : settings)
+    if (s.label == "freezing: reference") s.snapshot = snapshot;
   std::vector<json> rows;
   json ref, fref;  // reference runs (plain, freezing)
   for (const Setting& s : settings) {
@@ -272,6 +424,7 @@ int main(int argc, char** argv) {
       if (r.value("diverged", false)) break;
     }
     json row = first;
+    if (!s.freezing && !no_hydrostatic && !row.value("diverged", false)) row.update(RunChild(s, end_time, threads, Job::kHydrostatic));
     row["group"] = s.group, row["label"] = s.label;
     row["eta"] = s.scene.solver.eta, row["cfl"] = s.scene.solver.cfl, row["dt_max"] = s.scene.solver.dt_max;
     row["omega"] = s.scene.solver.omega, row["smoothing_ratio"] = s.scene.fluid.smoothing_ratio;
@@ -316,32 +469,71 @@ int main(int argc, char** argv) {
     }
     row["front_position_diff_dp"] = pos_diff;
     row["ice_diff"] = s.freezing && base.contains("ice") ? double(row.value("ice", 0LL) - base.value("ice", 0LL)) : NAN;
+    if (s.freezing) {  // water turns to ice: the dam-break measures do not apply
+      for (const char* key : {"front_error_mean", "front_error_max", "front_position_diff_dp", "volume_drift"}) row[key] = NAN;
+    }
+    row["ice_shape_diff_dp"] = s.freezing && row.contains("ice_positions") && base.contains("ice_positions")
+                                   ? ChamferDistance(row["ice_positions"], base["ice_positions"]) / row["dp"].get<double>()
+                                   : NAN;
     std::fprintf(stderr, "  %-52s %6.2f s wall  %5lld steps  front err %5.1f%%\n", s.label.c_str(), row["wall_s"].get<double>(),
                  row.value("steps", 0LL), 100 * front_mean);
     if (diverged) std::fprintf(stderr, "    diverged: %s\n", row.value("failure", std::string()).c_str());
     rows.push_back(row);
   }
 
+  // Reconstruction voxel size, on the freezing reference's ice (the surface stage's own knob).
+  std::vector<json> surface_rows;
+  if (!no_surface && std::filesystem::exists(snapshot)) {
+    for (const double ratio : {1.0, 0.75, 0.5, 0.35, kFinestVoxel}) {
+      Setting s;
+      s.snapshot = snapshot, s.voxel_ratio = ratio;
+      std::vector<double> wall, cpu, rss;
+      json first;
+      for (int k = 0; k < repeats; ++k) {
+        json r = RunChild(s, end_time, threads, Job::kVoxelSweep);
+        if (r.value("diverged", false)) {
+          first = r;
+          break;
+        }
+        if (k == 0) first = r;
+        wall.push_back(r["wall_s"]), cpu.push_back(r["surface_cpu_s"]), rss.push_back(r["surface_peak_rss_mib"]);
+      }
+      if (first.value("diverged", false)) {
+        std::fprintf(stderr, "  voxel sweep skipped: %s\n", first.value("failure", std::string()).c_str());
+        break;
+      }
+      first["voxel_ratio"] = ratio;
+      first["wall_s"] = Median(wall), first["surface_cpu_s"] = Median(cpu), first["surface_peak_rss_mib"] = Median(rss);
+      std::fprintf(stderr, "  voxel %.2f d_p                                        %6.2f s wall\n", ratio, first["wall_s"].get<double>());
+      surface_rows.push_back(first);
+    }
+  }
+
+  std::filesystem::remove(snapshot);
   const std::string load_after = LoadAverage();
   std::printf("\nRime speed/accuracy study: dam break a = %.2f m (height 2a), %.2f s simulated, %d CPU threads, median of %d runs; "
               "load average before %s, after %s\n",
               kA, end_time, used_threads, repeats, load_before.c_str(), load_after.c_str());
   std::printf("errors against the reference run of the same scene; front error = |Z - Z_ref| / Z_ref at 0.1 s intervals; "
-              "pos = mean displacement of the front's particles from the reference, in d_p\n");
-  std::printf("%-46s %7s %6s %7s %6s %6s %8s %8s %8s %7s %7s %6s %6s %6s\n", "setting", "water", "wall s", "CPU s", "steps", "iter",
-              "MiB", "rho avg%", "rho max%", "vol %", "front%", "max%", "pos", "ice");
+              "pos = mean displacement of the front's particles from the reference, in d_p; hydro%% = hydrostatic slope error "
+              "(column 0.5 m, same knobs); ice shape = symmetric mean nearest distance to the reference's ice, in d_p\n");
+  std::printf("%-46s %7s %6s %7s %6s %6s %8s %8s %8s %7s %7s %6s %6s %7s %6s %6s\n", "setting", "water", "wall s", "CPU s", "steps",
+              "iter", "MiB", "rho avg%", "rho max%", "vol %", "front%", "max%", "pos", "hydro%", "ice", "shape");
   std::ofstream csv(out_dir + "/results.csv");
   csv << "group,label,water,dp,eta,cfl,dt_max,omega,smoothing_ratio,precision,wall_s,cpu_s,steps,mean_iterations,peak_rss_mib,"
-         "mean_density_error,max_density_error,volume_drift,front_error_mean,front_error_max,front_position_diff_dp,ice,ice_diff,diverged\n";
+         "mean_density_error,max_density_error,volume_drift,front_error_mean,front_error_max,front_position_diff_dp,ice,ice_diff,diverged,"
+         "hydro_slope_error,hydro_max_speed,ice_shape_diff_dp\n";
   json out = json::array();
   for (json& r : rows) {
     const bool div = r.value("diverged", false);
-    std::printf("%-46s %7lld %6.2f %7.2f %6lld %6.1f %8.0f %8.3f %8.2f %7.3f %7.2f %6.2f %6.2f %6s%s\n", r["label"].get<std::string>().c_str(),
-                r.value("fluid", 0LL), r["wall_s"].get<double>(), r["cpu_s"].get<double>(), r.value("steps", 0LL),
-                r.value("mean_iterations", 0.0), r["peak_rss_mib"].get<double>(), 100 * r.value("mean_density_error", 0.0),
-                100 * r.value("max_density_error", 0.0), 100 * r.value("volume_drift", 0.0), 100 * r["front_error_mean"].get<double>(),
-                100 * r["front_error_max"].get<double>(), r["front_position_diff_dp"].get<double>(),
-                r["group"] == "freezing" ? std::to_string(r.value("ice", 0LL)).c_str() : "-", div ? "  DIVERGED" : "");
+    const double hydro = r.value("hydro_slope_error", NAN), shape = r.value("ice_shape_diff_dp", NAN);
+    std::printf("%-46s %7lld %6.2f %7.2f %6lld %6.1f %8.0f %8.3f %8.2f %7.3f %7.2f %6.2f %6.2f %7.2f %6s %6.2f%s\n",
+                r["label"].get<std::string>().c_str(), r.value("fluid", 0LL), r["wall_s"].get<double>(), r["cpu_s"].get<double>(),
+                r.value("steps", 0LL), r.value("mean_iterations", 0.0), r["peak_rss_mib"].get<double>(),
+                100 * r.value("mean_density_error", 0.0), 100 * r.value("max_density_error", 0.0), 100 * r.value("volume_drift", 0.0),
+                100 * r["front_error_mean"].get<double>(), 100 * r["front_error_max"].get<double>(), r["front_position_diff_dp"].get<double>(),
+                100 * hydro, r["group"] == "freezing" ? std::to_string(r.value("ice", 0LL)).c_str() : "-", shape,
+                div ? "  DIVERGED" : (r.value("hydro_diverged", false) ? "  hydrostatic column DIVERGED" : ""));
     csv << r["group"].get<std::string>() << ",\"" << r["label"].get<std::string>() << "\"," << r.value("fluid", 0LL) << ","
         << r.value("dp", 0.0) << "," << r["eta"] << "," << r["cfl"] << "," << r["dt_max"] << "," << r["omega"] << ","
         << r["smoothing_ratio"] << "," << r["precision"].get<std::string>() << "," << r["wall_s"] << "," << r["cpu_s"] << ","
@@ -349,13 +541,32 @@ int main(int argc, char** argv) {
         << r.value("mean_density_error", 0.0) << "," << r.value("max_density_error", 0.0) << "," << r.value("volume_drift", 0.0)
         << "," << r["front_error_mean"].get<double>() << "," << r["front_error_max"].get<double>() << ","
         << r["front_position_diff_dp"].get<double>() << "," << r.value("ice", 0LL) << "," << r["ice_diff"].get<double>() << ","
-        << (div ? 1 : 0) << "\n";
+        << (div ? 1 : 0) << "," << r.value("hydro_slope_error", NAN) << "," << r.value("hydro_max_speed", NAN) << ","
+        << r.value("ice_shape_diff_dp", NAN) << "\n";
     r.erase("positions");
+    r.erase("ice_positions");
     out.push_back(r);
   }
   csv.close();
+  if (!surface_rows.empty()) {
+    std::printf("\nReconstruction voxel size (freezing reference's %lld ice particles, ellipsoid field; error = distance of the mesh "
+                "from the level set at voxel %.2f d_p, at the mesh's vertices, in d_p; median of %d runs):\n",
+                surface_rows[0].value("ice", 0LL), kFinestVoxel, repeats);
+    std::printf("%-14s %10s %8s %8s %10s %10s %10s\n", "voxel / d_p", "wall s", "CPU s", "MiB", "triangles", "err mean", "err p95");
+    std::ofstream scsv(out_dir + "/surface.csv");
+    scsv << "voxel_ratio,voxel_size,wall_s,cpu_s,peak_rss_mib,triangles,error_mean_dp,error_p95_dp\n";
+    for (const json& r : surface_rows) {
+      std::printf("%-14.2f %10.3f %8.3f %8.0f %10llu %10.3f %10.3f\n", r["voxel_ratio"].get<double>(), r["wall_s"].get<double>(),
+                  r["surface_cpu_s"].get<double>(), r["surface_peak_rss_mib"].get<double>(), r["triangles"].get<unsigned long long>(),
+                  r["surface_error_mean_dp"].get<double>(), r["surface_error_p95_dp"].get<double>());
+      scsv << r["voxel_ratio"] << "," << r["voxel_size"] << "," << r["wall_s"] << "," << r["surface_cpu_s"] << ","
+           << r["surface_peak_rss_mib"] << "," << r["triangles"] << "," << r["surface_error_mean_dp"] << ","
+           << r["surface_error_p95_dp"] << "\n";
+    }
+  }
   json doc = {{"study", "dam break speed/accuracy"}, {"column_width_m", kA}, {"end_time_s", end_time}, {"threads", used_threads},
-              {"repeats", repeats}, {"load_average_before", load_before}, {"load_average_after", load_after}, {"runs", out}};
+              {"repeats", repeats}, {"load_average_before", load_before}, {"load_average_after", load_after}, {"runs", out},
+              {"voxel_sweep", surface_rows}};
   std::ofstream(out_dir + "/results.json") << doc.dump(2) << "\n";
   std::printf("wrote %s/results.csv and %s/results.json\n", out_dir.c_str(), out_dir.c_str());
 
