@@ -307,6 +307,14 @@ void Simulation<T>::RecomputeBoundaryVolumes() {
   s.bvol.resize(s.nb());
   s.bpsi.resize(s.nb());
   boundary::ComputeBoundaryVolumes<T>(device_, s.bx.data(), s.nb(), T(scene_.fluid.smoothing_length()), s.bvol.data());
+  FinishBoundaryVolumes();
+}
+
+template <class T>
+void Simulation<T>::FinishBoundaryVolumes() {
+  State& s = *state_;
+  const double dp = scene_.fluid.spacing;
+  if (s.ice_count > 0) exec::ParallelFor(device_, s.nb(), kernels::CapIceVolume<T>{s.bphase.data(), T(dp * dp * dp), s.bvol.data()});
   exec::ParallelFor(device_, s.nb(), kernels::Scale<T>{s.bvol.data(), T(scene_.fluid.rest_density), s.bpsi.data()});
 }
 
@@ -613,7 +621,7 @@ void Simulation<T>::ConvertToIce(const DeviceArray<std::uint32_t>& frozen_list, 
   const Index dirty = ListFlagged(device_, s.region, s.nb(), s.slot, s.region_list);
   exec::ParallelFor(device_, dirty, boundary::kernels::BoundaryVolume<T>{s.boundary_grid.view(), CubicSpline<T>(support / 2), s.bvol.data(),
                                                                           s.region_list.data()});
-  exec::ParallelFor(device_, s.nb(), kernels::Scale<T>{s.bvol.data(), T(scene_.fluid.rest_density), s.bpsi.data()});
+  FinishBoundaryVolumes();
 }
 
 template <class T>

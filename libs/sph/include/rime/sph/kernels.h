@@ -445,6 +445,20 @@ struct Scale {
   RIME_HD void operator()(Index i) const { out[i] = factor * in[i]; }
 };
 
+/// Caps an ice particle's Akinci volume at the volume of the water it froze from (m/ρ0). Akinci's
+/// V_b = 1/Σ_k W_bk assumes a densely sampled surface: ice frozen away from walls and other ice has
+/// few boundary neighbours and got up to π h³ ≈ 3 d_p³, so its water neighbours' density jumped by
+/// up to 26 % at the conversion and the pressure solve blasted them away (up to 450 m/s at tight η).
+template <class T>
+struct CapIceVolume {
+  const std::uint8_t* phase;
+  T cap;
+  T* volume;
+  RIME_HD void operator()(Index b) const {
+    if (phase[b] == std::uint8_t(2) && volume[b] > cap) volume[b] = cap;
+  }
+};
+
 /// out[i] = x_i·u and out[n + i] = −x_i·u: the fluid's extent along u from two maxima.
 template <class T>
 struct Heights {
@@ -537,7 +551,7 @@ struct CompactionOrder {
   X(rime::sph::kernels::AirPressureAcceleration<T>) X(rime::sph::kernels::AdvectVelocity<T>)                       \
   X(rime::sph::kernels::PredictAdvection<T>) X(rime::sph::kernels::DisplacementSum<T>)                             \
   X(rime::sph::kernels::PressureUpdate<T>) X(rime::sph::kernels::IntegratePressure<T>)                             \
-  X(rime::sph::kernels::SquaredSpeed<T>) X(rime::sph::kernels::Heights<T>) X(rime::sph::kernels::Scale<T>) X(rime::sph::kernels::MoveBoundary<T>) X(rime::sph::kernels::InsideDomain<T>) \
+  X(rime::sph::kernels::SquaredSpeed<T>) X(rime::sph::kernels::Heights<T>) X(rime::sph::kernels::CapIceVolume<T>) X(rime::sph::kernels::Scale<T>) X(rime::sph::kernels::MoveBoundary<T>) X(rime::sph::kernels::InsideDomain<T>) \
   X(rime::sph::kernels::Gather<T>) X(rime::sph::kernels::Gather<rime::Vec3<T>>) X(rime::sph::kernels::Gather<rime::freeze::Sym6<T>>)
 
 #define RIME_SPH_KERNELS(X)                                                                        \

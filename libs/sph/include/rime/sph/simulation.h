@@ -106,6 +106,7 @@ class Simulation {
   void Emit(double dt, StepStats& stats);
   void UpdateBoundaryMotion(double t);
   void RecomputeBoundaryVolumes();
+  void FinishBoundaryVolumes();  // ice volume cap, then Ψ = ρ0 V
   void ComputeDomain(const std::vector<Vec3<T>>& fluid);
   void CheckDivergence(const StepStats& stats) const;
   void Freeze(double dt);
