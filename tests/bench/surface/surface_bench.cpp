@@ -4,7 +4,9 @@
 //
 // Usage: rime_surface_bench [--sizes 50000,500000,2000000] [--runs 3] [--sheet] [--openvdb] [--json FILE]
 // Peak memory is measured in a child process per case (fork), so cases do not inherit each
-// other's peaks.
+// other's peaks. The parent never runs TBB: a child forked after TBB has started its workers gets
+// none and runs every parallel loop on one thread (this benchmark measured one core until the
+// particle generator, which uses TBB, moved into a child of its own).
 #include <openvdb/openvdb.h>
 #include <openvdb/tools/ParticlesToLevelSet.h>
 #include <openvdb/tools/VolumeToMesh.h>
@@ -13,8 +15,6 @@
 #include <malloc.h>
 #endif
 #include <sys/wait.h>
-#include <tbb/global_control.h>
-#include <tbb/info.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -25,7 +25,9 @@
 #include <fstream>
 #include <nlohmann/json.hpp>
 #include <random>
+#include <stdexcept>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "rime/surface/reconstruct.h"
@@ -83,6 +85,50 @@ struct OpenVdbParticles {
     rad = radius;
   }
 };
+
+// IceShape in a child process, the set sent back through a pipe, so that the parent stays free of
+// TBB (see the header).
+surface::ParticleSet GenerateIsolated(std::size_t n, bool sheet) {
+  int fd[2];
+  if (pipe(fd) != 0) throw std::runtime_error("pipe failed");
+  const pid_t pid = fork();
+  if (pid == 0) {
+    close(fd[0]);
+    const surface::ParticleSet set = IceShape(n, sheet);
+    auto send = [&](const void* data, std::size_t bytes) {
+      for (const char* c = static_cast<const char*>(data); bytes > 0;) {
+        const ssize_t w = write(fd[1], c, bytes);
+        if (w <= 0) _exit(1);
+        c += w, bytes -= std::size_t(w);
+      }
+    };
+    const std::uint64_t count = set.size();
+    send(&count, sizeof count);
+    send(set.positions.data(), count * sizeof(Vec3d));
+    send(set.stored_anisotropy.data(), count * sizeof(std::array<float, 6>));
+    _exit(0);
+  }
+  close(fd[1]);
+  auto receive = [&](void* data, std::size_t bytes) {
+    for (char* c = static_cast<char*>(data); bytes > 0;) {
+      const ssize_t r = read(fd[0], c, bytes);
+      if (r <= 0) throw std::runtime_error("particle generator failed");
+      c += r, bytes -= std::size_t(r);
+    }
+  };
+  surface::ParticleSet set;
+  set.spacing = kSpacing;
+  std::uint64_t count = 0;
+  receive(&count, sizeof count);
+  set.positions.resize(count);
+  set.stored_anisotropy.resize(count);
+  receive(set.positions.data(), count * sizeof(Vec3d));
+  receive(set.stored_anisotropy.data(), count * sizeof(std::array<float, 6>));
+  close(fd[0]);
+  int status = 0;
+  waitpid(pid, &status, 0);
+  return set;
+}
 
 double CpuSeconds() {
   rusage usage{};
@@ -188,13 +234,13 @@ int main(int argc, char** argv) {
       return 2;
     }
   }
-  const int threads = tbb::info::default_concurrency();
+  const int threads = int(std::thread::hardware_concurrency());
   nlohmann::json results = nlohmann::json::array();
   std::printf("threads: %d, voxel = spacing/2, shape: %s, median of %d runs (by wall time); M/cpu-s = particles per CPU-second (user+sys, robust to a shared machine)\n", threads, sheet ? "jittered two-layer ice sheet" : "jittered ice ball", runs);
   std::printf("%-24s %10s %9s %9s %9s %9s %10s %12s %11s %10s\n", "method", "particles", "wall s", "field s", "mesh s", "cpu s",
               "M part/s", "M/cpu-s", "triangles", "peak MB");  // MB = 1e6 bytes
   for (std::size_t n : sizes) {
-    const surface::ParticleSet set = IceShape(n, sheet);
+    const surface::ParticleSet set = GenerateIsolated(n, sheet);
 #ifdef __GLIBC__
     malloc_trim(0);  // the generator's freed arrays would otherwise count in every child's peak
 #endif
