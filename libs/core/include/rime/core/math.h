@@ -151,10 +151,13 @@ template <class T> RIME_HDI Vec3<T> SolveSpd(const Mat3<T>& a, const Vec3<T>& b)
 /// a = V diag(values) V^T with values sorted descending and V's columns the eigenvectors.
 template <class T> RIME_HDI void SymmetricEigen(Mat3<T> a, Vec3<T>& values, Mat3<T>& vectors) {
   Mat3<T> v = Mat3<T>::Identity();
+  // Converged when the off-diagonal is at rounding level (ε², ε the precision's epsilon): float
+  // never reaches a fixed 1e-30 and ran all 16 sweeps.
+  const T tolerance = sizeof(T) == sizeof(float) ? T(1.5e-14) : T(1e-30);
   for (int sweep = 0; sweep < 16; ++sweep) {
     const T off = a.m[0][1] * a.m[0][1] + a.m[0][2] * a.m[0][2] + a.m[1][2] * a.m[1][2];
     const T diag = a.m[0][0] * a.m[0][0] + a.m[1][1] * a.m[1][1] + a.m[2][2] * a.m[2][2];
-    if (off <= T(1e-30) * diag || off == T(0)) break;
+    if (off <= tolerance * diag || off == T(0)) break;
     for (int p = 0; p < 2; ++p) {
       for (int q = p + 1; q < 3; ++q) {
         const T apq = a.m[p][q];
