@@ -310,6 +310,8 @@ void Simulation<T>::RecomputeBoundaryVolumes() {
   FinishBoundaryVolumes();
 }
 
+static_assert(freeze::kIcePhase == std::uint8_t(io::Phase::kIce), "device kernels and files must agree on the ice phase");
+
 template <class T>
 void Simulation<T>::FinishBoundaryVolumes() {
   State& s = *state_;

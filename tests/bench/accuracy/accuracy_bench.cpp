@@ -236,6 +236,11 @@ double ChamferDistance(const json& a, const json& b) {
   return 0.5 * (mean_nearest(pa, pb) + mean_nearest(pb, pa));
 }
 
+// User + system CPU time of a rusage record, s.
+double CpuSeconds(const rusage& u) {
+  return double(u.ru_utime.tv_sec + u.ru_stime.tv_sec) + 1e-6 * double(u.ru_utime.tv_usec + u.ru_stime.tv_usec);
+}
+
 enum class Job { kDamBreak, kHydrostatic, kVoxelSweep };
 
 // Surface reconstruction of the freezing reference's ice (its last frame, default ellipsoid field)
@@ -254,8 +259,7 @@ json RunVoxelSweep(const Setting& s) {
   const double wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   rusage usage{};
   getrusage(RUSAGE_SELF, &usage);
-  const double cpu_s = usage.ru_utime.tv_sec + usage.ru_stime.tv_sec + 1e-6 * (usage.ru_utime.tv_usec + usage.ru_stime.tv_usec);
-  json r = {{"wall_s", wall_s}, {"surface_cpu_s", cpu_s}, {"surface_peak_rss_mib", usage.ru_maxrss / 1024.0},
+  json r = {{"wall_s", wall_s}, {"surface_cpu_s", CpuSeconds(usage)}, {"surface_peak_rss_mib", usage.ru_maxrss / 1024.0},
             {"ice", ice.size()}, {"triangles", coarse.stats.triangles}, {"voxel_size", coarse.stats.voxel_size}};
   settings.voxel_ratio = kFinestVoxel;
   const surface::Result fine = surface::Reconstruct(ice, settings);
@@ -317,7 +321,7 @@ json RunChild(const Setting& s, double end_time, int threads, Job job = Job::kDa
   rusage usage{};
   wait4(pid, &status, 0, &usage);
   json r = text.empty() ? json{{"diverged", true}, {"failure", "child crashed"}} : json::parse(text);
-  r["cpu_s"] = usage.ru_utime.tv_sec + usage.ru_stime.tv_sec + 1e-6 * (usage.ru_utime.tv_usec + usage.ru_stime.tv_usec);
+  r["cpu_s"] = CpuSeconds(usage);
   r["peak_rss_mib"] = usage.ru_maxrss / 1024.0;
   return r;
 }

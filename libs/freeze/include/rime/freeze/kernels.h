@@ -16,6 +16,9 @@
 
 namespace rime::freeze {
 
+/// Boundary phase of ice (io::Phase::kIce; io is host-only, checked in simulation.cpp).
+inline constexpr std::uint8_t kIcePhase = 2;
+
 /// A symmetric 3x3 matrix as six components (xx, yy, zz, xy, xz, yz): the stored anisotropy D.
 template <class T>
 struct Sym6 {
@@ -128,7 +131,7 @@ struct FilmAndGrowth {
       const Mat3<T> G = anisotropy::FromComponents(d[j].c) * inv_h;
       gv += v[j] * anisotropy::Kernel(r, G);
     }
-    const T alpha = boundary_phase[b] == 2 ? params.alpha_ice : params.alpha_solid;
+    const T alpha = boundary_phase[b] == kIcePhase ? params.alpha_ice : params.alpha_solid;
     const T s = alpha * boundary_volume[b] * density_sum / params.film_max;
     const T keep = std::pow(T(1) - (s < T(1) ? s : T(1)), dt / params.dt_ref);
     film[b] = T(1) - (T(1) - film[b]) * keep;
@@ -256,7 +259,7 @@ struct PhaseDecision {
       const Vec3<T> x_isf = boundary_x[b] - xj;
       const T fr = FreezingFraction(growth[b], growth_valid[b] != 0, x_isf, params);
       const T ce = f * fr * anisotropy::Kernel(x_isf, G) * scale;
-      if (boundary_phase[b] == 2) {
+      if (boundary_phase[b] == kIcePhase) {
         ce_i = params.ce_sum ? ce_i + ce : (ce > ce_i ? ce : ce_i);
         if (ce > best_i) best_i = ce, arg_i = b;
       } else {

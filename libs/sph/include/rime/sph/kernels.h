@@ -455,7 +455,7 @@ struct CapIceVolume {
   T cap;
   T* volume;
   RIME_HD void operator()(Index b) const {
-    if (phase[b] == std::uint8_t(2) && volume[b] > cap) volume[b] = cap;
+    if (phase[b] == freeze::kIcePhase && volume[b] > cap) volume[b] = cap;
   }
 };
 
