@@ -72,6 +72,50 @@ void ClampToBounds(Vec3f& s, const anisotropy::Params<double>& p) {
   for (int k = 0; k < 3; ++k) s[k] = std::clamp(s[k], lo, std::max(lo, s_hi));
 }
 
+constexpr std::uint32_t kSumLanes = 16;  // one AVX-512 register of floats
+constexpr float kFar = 1e30f;            // padding lanes: r² overflows, outside the support
+
+// Kernel-weighted neighbour sums of up to kSumLanes particles side by side: Σ W, Σ W r, Σ W r rᵀ
+// (r = x_j − x_i) and the neighbour count, as anisotropy::CovarianceAccumulator keeps them.
+struct LaneSums {
+  alignas(64) float x[kSumLanes], y[kSumLanes], z[kSumLanes];
+  alignas(64) float weight[kSumLanes], fx[kSumLanes] = {}, fy[kSumLanes] = {}, fz[kSumLanes] = {};
+  alignas(64) float second[6][kSumLanes] = {};
+  alignas(64) std::int32_t count[kSumLanes] = {};
+
+  // Candidate (xj, yj, zj); lane `self` is the candidate itself (any value >= kSumLanes: none).
+  template <bool kSecondMoments>
+  void Add(float xj, float yj, float zj, std::uint32_t self, float support, const CubicSpline<float>& kernel) {
+    const float r2max = support * support;
+#pragma GCC ivdep
+    for (std::uint32_t l = 0; l < kSumLanes; ++l) {
+      const float rx = xj - x[l], ry = yj - y[l], rz = zj - z[l];
+      const float r2 = rx * rx + ry * ry + rz * rz;
+      const bool in = (r2 < r2max) & (l != self);
+      // Branch-free cubic spline B(q) (same values as CubicSpline::Shape).
+      const float q = std::sqrt(r2) * kernel.inv_h;
+      const float a = std::max(2.0f - q, 0.0f), b = std::max(1.0f - q, 0.0f);
+      const float w = in ? kernel.w_norm * (a * a * a - 4.0f * b * b * b) : 0.0f;
+      weight[l] += w;
+      fx[l] += rx * w, fy[l] += ry * w, fz[l] += rz * w;
+      if constexpr (kSecondMoments) {
+        second[0][l] += w * rx * rx, second[1][l] += w * ry * ry, second[2][l] += w * rz * rz;
+        second[3][l] += w * rx * ry, second[4][l] += w * rx * rz, second[5][l] += w * ry * rz;
+      }
+      count[l] += in;
+    }
+  }
+
+  anisotropy::CovarianceAccumulator<float> Accumulator(std::uint32_t l) const {
+    anisotropy::CovarianceAccumulator<float> acc;
+    acc.weight_sum = weight[l];
+    acc.first = Vec3f(fx[l], fy[l], fz[l]);
+    for (int k = 0; k < 6; ++k) acc.second[k] = second[k][l];
+    acc.neighbors = count[l];
+    return acc;
+  }
+};
+
 }  // namespace
 
 double VoxelSize(const ParticleSet& particles, const Settings& settings) {
@@ -142,24 +186,9 @@ PreparedParticles Prepare(const ParticleSet& particles, const Settings& settings
   params.s_min = float(settings.anisotropy.s_min), params.s_max = float(settings.anisotropy.s_max);
   params.center_on_particle = settings.anisotropy.center_on_particle;
 
-  exec::cpu::ParallelFor(Index(n), [&](Index k) {
+  // Per particle, from its neighbour sums: the smoothed centre and D.
+  const auto finish = [&](Index k, const anisotropy::CovarianceAccumulator<float>& acc) {
     const Index i = order[k];
-    anisotropy::CovarianceAccumulator<float> acc;
-    acc.AddSelf(kernel.W0());
-    if (need_pca) {
-      view.ForEachNeighbor(sorted[k], support, [&](std::uint32_t j, const Vec3f& r, float) {
-        if (j != std::uint32_t(k)) acc.Add(-r, kernel.W(Norm(r)));
-      });
-    } else if (need_neighbors) {
-      // Centre smoothing needs only the weighted mean: skip the second moments.
-      view.ForEachNeighbor(sorted[k], support, [&](std::uint32_t j, const Vec3f& r, float) {
-        if (j == std::uint32_t(k)) return;
-        const float w = kernel.W(Norm(r));
-        acc.weight_sum += w;
-        acc.first -= r * w;
-        ++acc.neighbors;
-      });
-    }
     const Vec3f mean_offset = acc.MeanOffset();
     // Centre smoothing (Yu & Turk): x̄ = (1 − λ) x + λ x̄^w.
     out.centers[i] = local[i] + mean_offset * float(settings.lambda);
@@ -201,6 +230,41 @@ PreparedParticles Prepare(const ParticleSet& particles, const Settings& settings
     anisotropy::ToComponents(a.D(), out.D[i].data());
     out.min_stretch[i] = std::min({a.stretch.x, a.stretch.y, a.stretch.z});
     out.max_stretch[i] = std::max({a.stretch.x, a.stretch.y, a.stretch.z});
+  };
+
+  if (!need_neighbors) {
+    exec::cpu::ParallelFor(Index(n), [&](Index k) {
+      anisotropy::CovarianceAccumulator<float> acc;
+      acc.AddSelf(kernel.W0());
+      finish(k, acc);
+    });
+    return out;
+  }
+  // Cell by cell: the 27 neighbour cells are looked up once for all particles of a cell (in grid
+  // order, so slot = index), and up to kLanes of its particles are summed side by side (SIMD across
+  // particles, candidates in sequence, as the boundary volumes). Each particle's sums add the same
+  // terms in the same order whatever the thread count.
+  std::vector<float> sx(n), sy(n), sz(n);
+  exec::cpu::ParallelFor(Index(n), [&](Index k) { sx[k] = sorted[k].x, sy[k] = sorted[k].y, sz[k] = sorted[k].z; });
+  exec::cpu::ParallelFor(Index(grid.cell_count()), [&](Index cell) {
+    const neighbors::kernels::CellNeighborhood<float> hood(view, view, std::uint32_t(cell));
+    const std::uint32_t begin = view.cell_start[cell], end = view.cell_start[cell + 1];
+    for (std::uint32_t s0 = begin; s0 < end; s0 += kSumLanes) {
+      const std::uint32_t m = std::min<std::uint32_t>(kSumLanes, end - s0);
+      LaneSums sums;
+      for (std::uint32_t l = 0; l < kSumLanes; ++l) {
+        sums.x[l] = l < m ? sx[s0 + l] : kFar;
+        sums.y[l] = l < m ? sy[s0 + l] : kFar;
+        sums.z[l] = l < m ? sz[s0 + l] : kFar;
+        sums.weight[l] = kernel.W0();  // the particle itself
+      }
+      for (int c = 0; c < hood.count; ++c)
+        for (std::uint32_t t = hood.begin[c]; t < hood.end[c]; ++t) {
+          if (need_pca) sums.Add<true>(sx[t], sy[t], sz[t], t - s0, support, kernel);
+          else sums.Add<false>(sx[t], sy[t], sz[t], t - s0, support, kernel);
+        }
+      for (std::uint32_t l = 0; l < m; ++l) finish(s0 + l, sums.Accumulator(l));
+    }
   });
   return out;
 }

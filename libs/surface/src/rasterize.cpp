@@ -144,7 +144,41 @@ struct FieldInputs {
   float volume = 0;                  // kernel sum: V / Δx³
   float iso = 0.5f;
   bool track_nearest = false;
+  const std::uint8_t* interior = nullptr;  // per particle: fully surrounded (Prepare)
+  bool deep_tiles = false;                 // see DeepLeaves
 };
+
+// Leaves that lie deep inside: the leaf and its 26 neighbour leaves all hold particles, and every
+// one of those particles is fully surrounded. The nearest particle that is not surrounded (and so
+// any exterior) is then at least one leaf (8 voxels, 4 spacings at voxel = d_p/2) away, farther
+// than the band, so every voxel of the leaf would end as an inactive −background interior voxel.
+// Evaluating the field there (most of a solid body's leaves) is skipped. Inside a closed body the
+// only difference can be an enclosed bubble in the level set, which the void removal (keep_voids
+// off, the only mode this is used in) drops from level set and mesh anyway.
+std::vector<std::uint8_t> DeepLeaves(const Plan& plan, const FieldInputs& in) {
+  std::vector<std::uint8_t> deep(plan.targets.size(), 0);
+  if (!in.deep_tiles || !in.interior) return deep;
+  const std::size_t bins = plan.bin_start.size() - 1;
+  std::vector<std::uint8_t> surrounded(bins);
+  exec::cpu::ParallelFor(Index(bins), [&](Index b) {
+    bool all = true;
+    for (std::uint32_t s = plan.bin_start[b]; s < plan.bin_start[b + 1] && all; ++s) all = in.interior[plan.sorted[s]] != 0;
+    surrounded[b] = all;
+  });
+  exec::cpu::ParallelFor(Index(plan.targets.size()), [&](Index t) {
+    std::int64_t lx, ly, lz;
+    KeyToLeaf(plan.targets[t], lx, ly, lz);
+    bool all = true;
+    for (int ox = -1; ox <= 1 && all; ++ox)
+      for (int oy = -1; oy <= 1 && all; ++oy)
+        for (int oz = -1; oz <= 1 && all; ++oz) {
+          const auto it = plan.bin_of_key.find(LeafKey(lx + ox, ly + oy, lz + oz));
+          all = it != plan.bin_of_key.end() && surrounded[it->second];
+        }
+    deep[t] = all;
+  });
+  return deep;
+}
 
 struct SymMat {
   float xx, yy, zz, xy, xz, yz;
@@ -256,6 +290,7 @@ struct RasterOutput {
   openvdb::MaskTree::Ptr shallow_outside;  // 0 <= φ < 1 voxel: where enclosed voids can be
   openvdb::MaskTree::Ptr far_outside;      // φ >= 1 voxel inside allocated leaves: seeds of the exterior
   openvdb::Vec3STree::Ptr velocity;
+  std::uint64_t deep_leaves = 0;  // filled as interior without evaluating the field
 };
 
 RasterOutput Rasterize(const Plan& plan, const FieldInputs& in, const std::vector<Vec3f>* velocities) {
@@ -268,12 +303,21 @@ RasterOutput Rasterize(const Plan& plan, const FieldInputs& in, const std::vecto
   std::vector<openvdb::MaskTree::LeafNodeType*> shallow_leaves(count, nullptr), far_leaves(count, nullptr);
   std::vector<openvdb::Vec3STree::LeafNodeType*> velocity_leaves(velocities ? count : 0, nullptr);
   const int K = plan.K;
+  const std::vector<std::uint8_t> deep = DeepLeaves(plan, in);
 
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 4), [&](const tbb::blocked_range<std::size_t>& range) {
     std::unique_ptr<LeafBuffers> buf(new LeafBuffers);
     for (std::size_t t = range.begin(); t != range.end(); ++t) {
       std::int64_t lx, ly, lz;
       KeyToLeaf(plan.targets[t], lx, ly, lz);
+      if (deep[t]) {
+        // Interior: inactive −background values, wholly inside (BuildInteriorBand keeps both).
+        const openvdb::Coord origin(plan.offset.x() + int(lx * kLeafDim), plan.offset.y() + int(ly * kLeafDim),
+                                    plan.offset.z() + int(lz * kLeafDim));
+        leaves[t] = new openvdb::FloatTree::LeafNodeType(origin, -background, false);
+        inside_leaves[t] = new openvdb::MaskTree::LeafNodeType(origin, true);
+        continue;
+      }
       const Vec3f leaf_origin(float(lx * kLeafDim), float(ly * kLeafDim), float(lz * kLeafDim));
       const bool sum = in.field == Field::kKernelSum;
       if (sum) {
@@ -350,6 +394,7 @@ RasterOutput Rasterize(const Plan& plan, const FieldInputs& in, const std::vecto
   });
 
   RasterOutput out;
+  out.deep_leaves = std::uint64_t(std::count(deep.begin(), deep.end(), std::uint8_t(1)));
   out.surface = std::make_shared<openvdb::FloatTree>(background);
   out.inside = std::make_shared<openvdb::MaskTree>(false);
   out.shallow_outside = std::make_shared<openvdb::MaskTree>(false);
@@ -359,9 +404,9 @@ RasterOutput Rasterize(const Plan& plan, const FieldInputs& in, const std::vecto
     if (!leaves[t]) continue;
     out.surface->addLeaf(leaves[t]);
     out.inside->addLeaf(inside_leaves[t]);
-    out.shallow_outside->addLeaf(shallow_leaves[t]);
-    out.far_outside->addLeaf(far_leaves[t]);
-    if (velocities) out.velocity->addLeaf(velocity_leaves[t]);
+    if (shallow_leaves[t]) out.shallow_outside->addLeaf(shallow_leaves[t]);
+    if (far_leaves[t]) out.far_outside->addLeaf(far_leaves[t]);
+    if (velocities && velocity_leaves[t]) out.velocity->addLeaf(velocity_leaves[t]);
   }
   return out;
 }
@@ -562,12 +607,15 @@ Result Reconstruct(const ParticleSet& particles, const Settings& settings) {
   const double volume = particles.particle_volume > 0 ? particles.particle_volume : std::pow(particles.spacing, 3);
   in.volume = float(volume / (dx * dx * dx));
   in.iso = float(settings.iso);
+  in.interior = prepared.interior.data();
+  in.deep_tiles = settings.deep_interior_tiles && !settings.keep_voids && settings.field != Field::kKernelSum;
   const bool want_velocity = settings.velocity_grid && !particles.velocities.empty();
   in.track_nearest = want_velocity;
   const double t_plan = Seconds(t0);
   RasterOutput raster = Rasterize(plan, in, want_velocity ? &particles.velocities : nullptr);
   const double t_raster = Seconds(t0);
   const std::size_t planned_leaves = plan.targets.size();
+  stats.deep_leaves = raster.deep_leaves;
   plan = Plan{};  // particle-side arrays are not needed any more: free them before meshing
   prepared = PreparedParticles{};
   if (!settings.keep_voids)
@@ -578,8 +626,8 @@ Result Reconstruct(const ParticleSet& particles, const Settings& settings) {
   BuildInteriorBand(*raster.surface, *raster.inside, band, float(dx));
   raster.inside.reset();
   openvdb::tools::pruneLevelSet(*raster.surface);
-  log::Debug("rasterize {} particles: plan {:.3f} s ({} leaves), field {:.3f} s, voids {:.3f} s ({} voxels), band+prune {:.3f} s",
-             particles.size(), t_plan, planned_leaves, t_raster - t_plan, t_voids - t_raster, stats.filled_void_voxels,
+  log::Debug("rasterize {} particles: plan {:.3f} s ({} leaves, {} deep), field {:.3f} s, voids {:.3f} s ({} voxels), band+prune {:.3f} s",
+             particles.size(), t_plan, planned_leaves, stats.deep_leaves, t_raster - t_plan, t_voids - t_raster, stats.filled_void_voxels,
              Seconds(t0) - t_voids);
 #ifdef __GLIBC__
   malloc_trim(0);  // hand freed particle arrays and mask leaves back before the mesh is built

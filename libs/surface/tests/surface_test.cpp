@@ -2,6 +2,8 @@
 // thin sheets, separated clusters, level-set validity and the VDB file contract.
 #include <gtest/gtest.h>
 #include <openvdb/tools/VolumeToMesh.h>
+#include <tbb/global_control.h>
+#include <tbb/task_arena.h>
 #include <unistd.h>
 
 #include <cmath>
@@ -263,6 +265,88 @@ TEST(Reconstruct, SlabMeshEqualsOneMesh) {
     for (const auto& p : mesh.positions) got.push_back({p.x, p.y, p.z});
     std::sort(got.begin(), got.end());
     EXPECT_TRUE(got == expected) << "same vertex positions, slabs of " << slab_leaves;
+  }
+}
+
+// Two results hold the same level set (every voxel of either: value and active state) and the
+// same mesh (positions and triangles in order).
+void ExpectSameResult(const Result& a, const Result& b, const std::string& what) {
+  const openvdb::FloatGrid &ga = *a.grids->surface, &gb = *b.grids->surface;
+  EXPECT_EQ(ga.activeVoxelCount(), gb.activeVoxelCount()) << what;
+  std::size_t differing = 0;
+  for (const auto* first : {&ga, &gb}) {
+    const openvdb::FloatGrid& second = first == &ga ? gb : ga;
+    auto acc = second.getConstAccessor();
+    for (auto it = first->cbeginValueOn(); it; ++it)
+      differing += acc.getValue(it.getCoord()) != *it || !acc.isValueOn(it.getCoord());
+  }
+  EXPECT_EQ(differing, 0u) << what << ": voxels whose value or state differ";
+  EXPECT_TRUE(a.mesh.positions == b.mesh.positions) << what << ": mesh vertices";
+  EXPECT_TRUE(a.mesh.triangles == b.mesh.triangles) << what << ": mesh triangles";
+}
+
+// A ball with a hollow centre (a bubble of radius 4 d_p): the bubble's wall is not "fully
+// surrounded" particles, so it must come out exactly as with every leaf evaluated.
+ParticleSet HollowBall(double radius, double hole) {
+  ParticleSet ball = Ball(radius);
+  std::erase_if(ball.positions, [&](const Vec3d& p) { return Norm(p) < hole; });
+  return ball;
+}
+
+// Leaves deep inside a body are filled as interior without evaluating the field (Settings::
+// deep_interior_tiles): the level set and the mesh must equal those of the full evaluation.
+TEST(Reconstruct, DeepInteriorTilesGiveTheSameLevelSetAndMesh) {
+  struct Case {
+    std::string name;
+    ParticleSet set;
+    Field field;
+  };
+  std::vector<Case> cases;
+  cases.push_back({"jittered ball, ellipsoids", Ball(18 * kSpacing), Field::kEllipsoids});
+  cases.push_back({"ball with a bubble, ellipsoids", HollowBall(24 * kSpacing, 4 * kSpacing), Field::kEllipsoids});
+  cases.push_back({"jittered ball, isotropic", Ball(18 * kSpacing, Vec3d(0.004, 0.001, -0.003)), Field::kIsotropic});
+  for (const Case& c : cases) {
+    Settings fast, full;
+    fast.field = full.field = c.field;
+    full.deep_interior_tiles = false;
+    const Result a = Reconstruct(c.set, fast), b = Reconstruct(c.set, full);
+    EXPECT_GT(a.stats.deep_leaves, 0u) << c.name << ": the case must have deep leaves to test anything";
+    EXPECT_EQ(b.stats.deep_leaves, 0u) << c.name;
+    ExpectSameResult(a, b, c.name);
+    ExpectClosedOutward(a.mesh, c.name);
+    if (c.name.find("bubble") != std::string::npos) {
+      // The bubble is a void, removed from the mesh: one outer shell only.
+      EXPECT_EQ(Analyze(a.mesh).components, 1u) << c.name;
+    }
+  }
+}
+
+// The reconstruction does not depend on the thread count (each leaf and each particle is
+// computed on its own, and the mesh is assembled in a fixed order).
+TEST(Reconstruct, SameResultForAnyThreadCount) {
+  ParticleSet ball = Ball(14 * kSpacing, Vec3d(0.001, 0.002, 0.003), 0.2);
+  ParticleSet sheet;
+  sheet.spacing = kSpacing;
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> u(-0.1, 0.1);
+  for (int i = 0; i < 40; ++i)
+    for (int j = 0; j < 40; ++j) sheet.positions.push_back(Vec3d(i + u(rng), j + u(rng), u(rng)) * kSpacing);
+  for (const auto& [name, set] : {std::pair<std::string, const ParticleSet*>{"ball", &ball}, {"sheet", &sheet}}) {
+    for (Field field : {Field::kEllipsoids, Field::kKernelSum}) {
+      Settings settings;
+      settings.field = field;
+      const auto with_threads = [&](int threads) {
+        // The arena gives `threads` slots even on a machine with fewer cores.
+        tbb::global_control limit(tbb::global_control::max_allowed_parallelism, std::size_t(threads));
+        tbb::task_arena arena(threads);
+        Result r;
+        arena.execute([&] { r = Reconstruct(*set, settings); });
+        return r;
+      };
+      const Result one = with_threads(1);
+      for (int threads : {2, 5})
+        ExpectSameResult(one, with_threads(threads), name + ", " + FieldName(field) + ", " + std::to_string(threads) + " threads");
+    }
   }
 }
 

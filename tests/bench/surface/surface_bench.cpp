@@ -2,7 +2,9 @@
 // voxel = spacing / 2, anisotropic ellipsoids (stored D), against OpenVDB's isotropic
 // ParticlesToLevelSet + volumeToMesh on the same particles.
 //
-// Usage: rime_surface_bench [--sizes 50000,500000,2000000] [--runs 3] [--sheet] [--openvdb] [--json FILE]
+// Usage: rime_surface_bench [--sizes 50000,500000,2000000] [--runs 3] [--threads N] [--sheet] [--openvdb] [--json FILE]
+// --threads caps the worker threads (default: all cores); at --threads 1 "per core" is measured
+// directly instead of divided out of a shared machine's parallel run.
 // Peak memory is measured in a child process per case (fork), so cases do not inherit each
 // other's peaks. The parent never runs TBB: a child forked after TBB has started its workers gets
 // none and runs every parallel loop on one thread (this benchmark measured one core until the
@@ -10,6 +12,7 @@
 #include <openvdb/openvdb.h>
 #include <openvdb/tools/ParticlesToLevelSet.h>
 #include <openvdb/tools/VolumeToMesh.h>
+#include <tbb/global_control.h>
 #include <sys/resource.h>
 #ifdef __GLIBC__
 #include <malloc.h>
@@ -137,7 +140,7 @@ double CpuSeconds() {
 }
 
 struct Measure {
-  double seconds = 0, rasterize = 0, mesh = 0, cpu_seconds = 0;
+  double seconds = 0, prepare = 0, rasterize = 0, mesh = 0, cpu_seconds = 0;
   std::uint64_t triangles = 0, active_voxels = 0;
 };
 
@@ -147,7 +150,8 @@ Measure RunRime(const surface::ParticleSet& set) {
   const surface::Result r = surface::Reconstruct(set, settings);
   Measure m;
   m.seconds = std::chrono::duration<double>(Clock::now() - t0).count();
-  m.rasterize = r.stats.seconds_prepare + r.stats.seconds_rasterize;
+  m.prepare = r.stats.seconds_prepare;
+  m.rasterize = r.stats.seconds_rasterize;
   m.mesh = r.stats.seconds_mesh;
   m.triangles = r.stats.triangles;
   m.active_voxels = r.stats.active_voxels;
@@ -177,14 +181,16 @@ Measure RunOpenVdb(const surface::ParticleSet& set) {
   return m;
 }
 
-// Runs `body` in a child process; returns its measure and peak resident memory.
+// Runs `body` in a child process with at most `threads` workers; returns its measure and peak
+// resident memory.
 template <class F>
-bool Isolated(F body, Measure& out, std::uint64_t& peak) {
+bool Isolated(F body, int threads, Measure& out, std::uint64_t& peak) {
   int fd[2];
   if (pipe(fd) != 0) return false;
   const pid_t pid = fork();
   if (pid == 0) {
     close(fd[0]);
+    tbb::global_control limit(tbb::global_control::max_allowed_parallelism, std::size_t(threads));
     const double cpu0 = CpuSeconds();
     Measure m = body();
     m.cpu_seconds = CpuSeconds() - cpu0;
@@ -211,6 +217,7 @@ int main(int argc, char** argv) {
   bool openvdb_baseline = false;
   std::string json_path = "surface_bench.json";
   bool sheet = false;
+  int threads = int(std::thread::hardware_concurrency());
   for (int a = 1; a < argc; ++a) {
     const std::string arg = argv[a];
     if (arg == "--sizes" && a + 1 < argc) {
@@ -223,6 +230,8 @@ int main(int argc, char** argv) {
       }
     } else if (arg == "--runs" && a + 1 < argc) {
       runs = std::stoi(argv[++a]);
+    } else if (arg == "--threads" && a + 1 < argc) {
+      threads = std::max(1, std::stoi(argv[++a]));
     } else if (arg == "--sheet") {
       sheet = true;
     } else if (arg == "--openvdb") {
@@ -230,15 +239,15 @@ int main(int argc, char** argv) {
     } else if (arg == "--json" && a + 1 < argc) {
       json_path = argv[++a];
     } else {
-      std::fprintf(stderr, "usage: %s [--sizes N,N,...] [--runs R] [--sheet] [--openvdb] [--json FILE]\n", argv[0]);
+      std::fprintf(stderr, "usage: %s [--sizes N,N,...] [--runs R] [--threads N] [--sheet] [--openvdb] [--json FILE]\n", argv[0]);
       return 2;
     }
   }
-  const int threads = int(std::thread::hardware_concurrency());
   nlohmann::json results = nlohmann::json::array();
   std::printf("threads: %d, voxel = spacing/2, shape: %s, median of %d runs (by wall time); M/cpu-s = particles per CPU-second (user+sys, robust to a shared machine)\n", threads, sheet ? "jittered two-layer ice sheet" : "jittered ice ball", runs);
-  std::printf("%-24s %10s %9s %9s %9s %9s %10s %12s %11s %10s\n", "method", "particles", "wall s", "field s", "mesh s", "cpu s",
-              "M part/s", "M/cpu-s", "triangles", "peak MB");  // MB = 1e6 bytes
+  // prepare = centre smoothing + D (rime only), field = rasterizing the level set.
+  std::printf("%-24s %10s %9s %9s %9s %9s %9s %10s %9s %12s %11s %10s\n", "method", "particles", "wall s", "prepare s", "field s",
+              "mesh s", "cpu s", "M part/s", "per core", "M/cpu-s", "triangles", "peak MB");  // MB = 1e6 bytes
   for (std::size_t n : sizes) {
     const surface::ParticleSet set = GenerateIsolated(n, sheet);
 #ifdef __GLIBC__
@@ -250,7 +259,7 @@ int main(int argc, char** argv) {
       for (int r = 0; r < runs; ++r) {
         Measure m;
         std::uint64_t p = 0;
-        if (!Isolated([&] { return method == 0 ? RunRime(set) : RunOpenVdb(set); }, m, p)) {
+        if (!Isolated([&] { return method == 0 ? RunRime(set) : RunOpenVdb(set); }, threads, m, p)) {
           std::fprintf(stderr, "case failed\n");
           return 1;
         }
@@ -264,13 +273,15 @@ int main(int argc, char** argv) {
       (void)!getloadavg(load, 1);  // after the runs: the others' share of this machine
       const double rate = double(set.size()) / m.seconds / 1e6;
       const double cpu_rate = double(set.size()) / m.cpu_seconds / 1e6;
-      std::printf("%-24s %10zu %9.3f %9.3f %9.3f %9.3f %10.3f %12.3f %11llu %10.0f  load %.1f\n", name, set.size(), m.seconds,
-                  m.rasterize, m.mesh, m.cpu_seconds, rate, cpu_rate, (unsigned long long)m.triangles, peak / 1e6, load[0]);
+      std::printf("%-24s %10zu %9.3f %9.3f %9.3f %9.3f %9.3f %10.3f %9.3f %12.3f %11llu %10.0f  load %.1f\n", name, set.size(),
+                  m.seconds, m.prepare, m.rasterize, m.mesh, m.cpu_seconds, rate, rate / threads, cpu_rate,
+                  (unsigned long long)m.triangles, peak / 1e6, load[0]);
       std::fflush(stdout);
       results.push_back({{"method", name},
                          {"particles", set.size()},
                          {"threads", threads},
                          {"seconds_median", m.seconds},
+                         {"seconds_prepare", m.prepare},
                          {"seconds_field", m.rasterize},
                          {"seconds_mesh", m.mesh},
                          {"particles_per_second", rate * 1e6},

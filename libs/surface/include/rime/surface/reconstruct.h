@@ -53,6 +53,8 @@ struct Settings {
   bool mesh = true;             // extract the triangle mesh
   bool mesh_velocities = false; // per-vertex velocity interpolated from particles (PLY)
   bool keep_voids = false;      // keep enclosed voids (gaps between ellipsoids) in the level set and mesh
+  bool deep_interior_tiles = true;  // ellipsoids/isotropic without keep_voids: leaves deep inside a body
+                                    // become interior tiles without evaluating the field (same result)
 };
 
 /// One phase of one frame, ready for reconstruction.
@@ -70,6 +72,7 @@ struct Stats {
   std::uint64_t particles = 0;
   std::uint64_t active_voxels = 0;
   std::uint64_t leaves = 0;
+  std::uint64_t deep_leaves = 0;  // leaves deep inside, filled without evaluating the field
   std::uint64_t vertices = 0, triangles = 0;
   std::uint64_t removed_void_shells = 0;   // enclosed inward-facing mesh shells dropped
   std::uint64_t filled_void_voxels = 0;    // enclosed outside voxels turned inside
