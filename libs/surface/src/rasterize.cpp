@@ -189,6 +189,8 @@ SymMat Square(const SymMat& d) {
           d.xx * d.xz + d.xy * d.yz + d.xz * d.zz, d.xy * d.xz + d.yy * d.yz + d.yz * d.zz};
 }
 
+constexpr float kNoValue = 3.4e38f;  // larger than any distance: min() keeps the other value
+
 struct LeafBuffers {
   float phi[512];
   float sum[512];
@@ -223,19 +225,26 @@ void SplatEllipsoid(const FieldInputs& in, std::uint32_t i, const Vec3f& c, floa
       if (rest < 0) continue;
       const float half = std::sqrt(rest);
       const int z0 = std::max(lo[2], int(std::ceil(c.z - half))), z1 = std::min(hi[2], int(std::floor(c.z + half)));
-      for (int z = z0; z <= z1; ++z) {
+      const auto distance = [&](int z) {
         const float rz = float(z) - c.z;
         const float px = ax + d.xz * rz, py = ay + d.yz * rz, pz = az + d.zz * rz;
         const float qx = bx + d2.xz * rz, qy = by + d2.yz * rz, qz = bz + d2.zz * rz;
         const float q2 = px * px + py * py + pz * pz;
         const float p2 = qx * qx + qy * qy + qz * qz;
         const float q = std::sqrt(q2);
-        const float phi = p2 > 1e-12f ? (q - rho) * q / std::sqrt(std::max(p2, 1e-12f)) : center_value;
-        float& slot = buf.phi[row + z];
-        if (track) {
-          if (phi < slot) slot = phi, buf.nearest[row + z] = std::int32_t(i);
-        } else {
-          slot = std::min(slot, phi);  // branch-free: lets the compiler vectorise the row
+        return p2 > 1e-12f ? (q - rho) * q / std::sqrt(std::max(p2, 1e-12f)) : center_value;
+      };
+      if (track) {
+        for (int z = z0; z <= z1; ++z) {
+          const float phi = distance(z);
+          if (phi < buf.phi[row + z]) buf.phi[row + z] = phi, buf.nearest[row + z] = std::int32_t(i);
+        }
+      } else {
+        // The whole row of 8 with the clipped part masked out: one fixed-length, branch-free loop
+        // that the compiler vectorises (same values as looping over z0..z1).
+        for (int z = 0; z < kLeafDim; ++z) {
+          const float phi = distance(z);
+          buf.phi[row + z] = std::min(buf.phi[row + z], z >= z0 && z <= z1 ? phi : kNoValue);
         }
       }
     }
