@@ -5,10 +5,12 @@
 //   drop:  a sphere of water dropped onto a solid sphere standing above a ground plane;
 //   throw: a block of water thrown sideways at the same sphere.
 // Measures (definitions in RESULTS.md and below): ice count; specks (ice not connected to a solid
-// through other ice); water lost to splashing; roughness of the ice on the sphere. Prints a table,
-// writes results.json / results.csv and top/side PNG views of the final particles.
+// through other ice); water lost to splashing; roughness of the ice on the sphere, of the particles
+// and of the surface rime-surface reconstructs from them. Prints a table, writes results.json /
+// results.csv, and top/side PNG views of the final particles and of the reconstructed ice.
 //
 // Usage: rime-compare-im2013 [--full] [--out DIR] [--scene drop|throw] [--frames] [--ablation]
+//   --frames also writes each run's final particle frame (.h5part) and its ice mesh (.obj).
 //   --ablation adds rime with one switch of the im2013 preset each: isotropic growth (rime+iso),
 //   Akinci 2013 surface tension (rime+ak13), no wall stickiness (rime-wall).
 #include <algorithm>
@@ -35,6 +37,8 @@
 #include "rime/io/particles.h"
 #include "rime/io/scene.h"
 #include "rime/sph/simulation.h"
+#include "rime/surface/frame_input.h"
+#include "rime/surface/reconstruct.h"
 
 namespace fs = std::filesystem;
 
@@ -156,6 +160,11 @@ struct Result {
   std::int64_t steps = 0, water_initial = 0;
   std::int64_t ice = 0, ice_components = 0, speck_components = 0, specks = 0;
   std::int64_t ice_on_sphere = 0;     // attached ice within 6 d_p of the sphere's surface (roughness input)
+  // The same roughness measured on the mesh rime-surface reconstructs from the ice on the sphere
+  // (default ice settings: ellipsoids with the stored anisotropy, voxel d_p / 2).
+  double surface_roughness_mm = 0, surface_thickness_mm = 0;
+  std::uint64_t surface_triangles = 0;
+  io::TriMesh ice_mesh;
   std::int64_t ice_sphere_attached = 0, ice_ground_only = 0;  // by what the component touches
   std::int64_t bits = 0;  // ice in components of at most kBitSize particles, attached or not (scattered ice)
   std::int64_t fluid_end = 0, removed = 0, airborne = 0, off_object = 0;
@@ -172,7 +181,14 @@ struct Result {
 // roughness is the RMS difference between each covered bin's height and the mean height of its
 // covered neighbour bins (within 1.6 bin spacings): a high-pass measure, 0 for a uniform coat,
 // d_p-sized for ice standing up in isolated particles or spikes.
-void MeasureRoughness(const std::vector<Vec3d>& ice, double dp, Result& r) {
+struct Roughness {
+  double rms_mm = 0, mean_height_mm = 0;
+  int covered_bins = 0, bins = 0;
+  std::int64_t points = 0;  // points within 6 d_p of the sphere's surface
+};
+
+Roughness MeasureRoughness(const std::vector<Vec3d>& points, double dp) {
+  Roughness out;
   const double bin_arc = 2 * dp / kSphereRadius;  // rad
   const int n = std::max(12, int(std::lround(4 * M_PI / (bin_arc * bin_arc))));
   std::vector<Vec3d> dir(n);
@@ -183,7 +199,7 @@ void MeasureRoughness(const std::vector<Vec3d>& ice, double dp, Result& r) {
   }
   std::vector<double> height(n, -1);
   double thickness = 0;
-  for (const Vec3d& p : ice) {
+  for (const Vec3d& p : points) {
     const Vec3d d = p - kSphereCenter;
     const double len = Norm(d);
     if (len > kSphereRadius + 6 * dp) continue;  // icicles hanging off and ice on the ground are not the coat
@@ -192,7 +208,7 @@ void MeasureRoughness(const std::vector<Vec3d>& ice, double dp, Result& r) {
     for (int k = 0; k < n; ++k)
       if (const double c = Dot(dir[k], d) / len; c > best_dot) best_dot = c, best = k;
     height[best] = std::max(height[best], len - kSphereRadius);
-    ++r.ice_on_sphere;
+    ++out.points;
   }
   const double neighbor_cos = std::cos(1.6 * std::sqrt(4 * M_PI / n));
   double sum2 = 0;
@@ -208,9 +224,32 @@ void MeasureRoughness(const std::vector<Vec3d>& ice, double dp, Result& r) {
     const double dev = height[k] - mean / m;
     sum2 += dev * dev, ++counted;
   }
-  r.bins = n, r.covered_bins = covered;
-  r.roughness_mm = counted ? 1e3 * std::sqrt(sum2 / counted) : 0;
-  r.mean_thickness_mm = covered ? 1e3 * thickness / covered : 0;
+  out.bins = n, out.covered_bins = covered;
+  out.rms_mm = counted ? 1e3 * std::sqrt(sum2 / counted) : 0;
+  out.mean_height_mm = covered ? 1e3 * thickness / covered : 0;
+  return out;
+}
+
+// The ice of the components on the sphere, reconstructed as the surface stage does by default;
+// the mesh's vertices go through the same roughness measure as the particles.
+void MeasureSurfaceRoughness(const io::ParticleFrame& frame, const std::vector<char>& on_sphere, double dp, Result& r) {
+  std::vector<std::string> warnings;
+  const surface::ParticleSet all = surface::SelectPhase(frame, io::Phase::kIce, {}, warnings);
+  if (all.size() != on_sphere.size()) throw Error(ExitCode::kFailure, "ice selection differs from the frame's ice");
+  surface::ParticleSet coat;
+  coat.spacing = all.spacing, coat.smoothing_length = all.smoothing_length, coat.particle_volume = all.particle_volume;
+  for (std::size_t i = 0; i < all.size(); ++i) {
+    if (!on_sphere[i]) continue;
+    coat.positions.push_back(all.positions[i]);
+    if (!all.stored_anisotropy.empty()) coat.stored_anisotropy.push_back(all.stored_anisotropy[i]);
+  }
+  if (coat.size() == 0) return;
+  surface::Result surf = surface::Reconstruct(coat, surface::Settings{});
+  std::vector<Vec3d> vertices(surf.mesh.positions.begin(), surf.mesh.positions.end());
+  const Roughness rough = MeasureRoughness(vertices, dp);
+  r.surface_roughness_mm = rough.rms_mm, r.surface_thickness_mm = rough.mean_height_mm;
+  r.surface_triangles = surf.mesh.triangle_count();
+  r.ice_mesh = std::move(surf.mesh);
 }
 
 Result Run(const std::string& which, const Variant& v, bool full, const fs::path& out, bool frames) {
@@ -266,6 +305,7 @@ Result Run(const std::string& which, const Variant& v, bool full, const fs::path
   const double link = 1.5 * dp;
   const Grid ice_grid(ice, link), solid_grid(solid, link), sphere_solid_grid(sphere_solid, link);
   std::vector<int> comp(ice.size(), -1);
+  std::vector<char> ice_on_sphere_component(ice.size(), 0);
   std::vector<int> stack;
   for (std::size_t s = 0; s < ice.size(); ++s) {
     if (comp[s] >= 0) continue;
@@ -287,7 +327,10 @@ Result Run(const std::string& which, const Variant& v, bool full, const fs::path
     for (int i : members) dest.push_back(ice[i]);
     if (!attached) ++r.speck_components, r.specks += std::int64_t(members.size());
     if (members.size() <= kBitSize) r.bits += std::int64_t(members.size());
-    if (on_sphere) r.ice_sphere_attached += std::int64_t(members.size());
+    if (on_sphere) {
+      r.ice_sphere_attached += std::int64_t(members.size());
+      for (int i : members) ice_on_sphere_component[i] = 1;
+    }
     else if (attached) r.ice_ground_only += std::int64_t(members.size());
   }
 
@@ -305,7 +348,10 @@ Result Run(const std::string& which, const Variant& v, bool full, const fs::path
     if (!all_grid.AnyNear(p, far)) ++r.airborne;
     if (!sphere_grid.AnyNear(p, far)) ++r.off_object;
   }
-  MeasureRoughness(r.ice_attached, dp, r);
+  const Roughness rough = MeasureRoughness(r.ice_attached, dp);
+  r.roughness_mm = rough.rms_mm, r.mean_thickness_mm = rough.mean_height_mm;
+  r.covered_bins = rough.covered_bins, r.bins = rough.bins, r.ice_on_sphere = rough.points;
+  if (r.finite) MeasureSurfaceRoughness(f, ice_on_sphere_component, dp, r);
   return r;
 }
 
@@ -408,6 +454,70 @@ void Picture(const Result& r, const fs::path& path) {
   WritePng(path, kW, kH, img);
 }
 
+// The reconstructed ice on the sphere, shaded, in two views 0.8 m wide around the sphere (top:
+// looking down −z; side: looking along +y, z from 0 to 0.8 m), over the sphere (ray-cast) and
+// the ground. Orthographic, z-buffered.
+void SurfacePicture(const Result& r, const fs::path& path) {
+  constexpr int kPanel = 480, kH = kPanel, kW = 2 * kPanel + 10;
+  constexpr double kHalf = 0.4, kSideZ0 = 0.4;  // m: half width; the side view's centre height
+  std::vector<std::uint8_t> img(std::size_t(kW) * kH * 3, 255);
+  const double scale = kPanel / (2 * kHalf);
+  const Vec3d light = Vec3d(-0.4, -0.5, 0.77) / Norm(Vec3d(-0.4, -0.5, 0.77));
+  for (int view = 0; view < 2; ++view) {
+    const int ox = view ? kPanel + 10 : 0;
+    // Panel coordinates: u = x; v = y (top) or z - 0.7 (side); depth towards the viewer.
+    const auto project = [&](const Vec3d& p, double& px, double& py, double& depth) {
+      px = (p.x + kHalf) * scale, py = kH - 1 - ((view ? p.z - kSideZ0 : p.y) + kHalf) * scale, depth = view ? -p.y : p.z;
+    };
+    std::vector<double> zbuf(std::size_t(kPanel) * kH, -1e30);
+    const auto shade = [&](int X, int Y, double depth, const Vec3d& n, std::array<double, 3> base) {
+      double& z = zbuf[std::size_t(Y) * kPanel + X];
+      if (depth <= z) return;
+      z = depth;
+      const double lit = 0.25 + 0.75 * std::max(0.0, Dot(n, light));
+      for (int c = 0; c < 3; ++c) img[(std::size_t(Y) * kW + ox + X) * 3 + c] = std::uint8_t(std::min(255.0, base[c] * lit));
+    };
+    for (int Y = 0; Y < kH; ++Y)
+      for (int X = 0; X < kPanel; ++X) {
+        const double u = X / scale - kHalf, v = (kH - 1 - Y) / scale - kHalf;
+        const double a = u - kSphereCenter.x, b = view ? v + kSideZ0 - kSphereCenter.z : v - kSphereCenter.y;
+        const double rest = kSphereRadius * kSphereRadius - a * a - b * b;
+        if (rest >= 0) {  // the sphere, seen from the viewer's side
+          const double c = std::sqrt(rest);
+          const Vec3d n = view ? Vec3d(a, -c, b) / kSphereRadius : Vec3d(a, b, c) / kSphereRadius;
+          shade(X, Y, view ? c - kSphereCenter.y : kSphereCenter.z + c, n, {200, 200, 200});
+        } else if (view && v + kSideZ0 < 0) {
+          shade(X, Y, -1e29, {0, -1, 0}, {235, 235, 235});  // below the ground
+        }
+      }
+    for (const auto& t : r.ice_mesh.triangles) {
+      const Vec3d p0(r.ice_mesh.positions[t[0]]), p1(r.ice_mesh.positions[t[1]]), p2(r.ice_mesh.positions[t[2]]);
+      Vec3d n = Cross(p1 - p0, p2 - p0);
+      if (Norm(n) == 0) continue;
+      n = n / Norm(n);
+      double x[3], y[3], d[3];
+      project(p0, x[0], y[0], d[0]), project(p1, x[1], y[1], d[1]), project(p2, x[2], y[2], d[2]);
+      const int x0 = std::max(0, int(std::floor(std::min({x[0], x[1], x[2]})))), x1 = std::min(kPanel - 1, int(std::ceil(std::max({x[0], x[1], x[2]}))));
+      const int y0 = std::max(0, int(std::floor(std::min({y[0], y[1], y[2]})))), y1 = std::min(kH - 1, int(std::ceil(std::max({y[0], y[1], y[2]}))));
+      const double area = (x[1] - x[0]) * (y[2] - y[0]) - (x[2] - x[0]) * (y[1] - y[0]);
+      if (std::fabs(area) < 1e-12) continue;
+      for (int Y = y0; Y <= y1; ++Y)
+        for (int X = x0; X <= x1; ++X) {
+          const double px = X + 0.5, py = Y + 0.5;
+          const double w0 = ((x[1] - px) * (y[2] - py) - (x[2] - px) * (y[1] - py)) / area;
+          const double w1 = ((x[2] - px) * (y[0] - py) - (x[0] - px) * (y[2] - py)) / area;
+          const double w2 = 1 - w0 - w1;
+          if (w0 < 0 || w1 < 0 || w2 < 0) continue;
+          shade(X, Y, w0 * d[0] + w1 * d[1] + w2 * d[2], view ? Vec3d(n.x, n.y, n.z) * (n.y > 0 ? -1.0 : 1.0) : n * (n.z < 0 ? -1.0 : 1.0),
+                {120, 190, 255});
+        }
+    }
+  }
+  for (int y = 0; y < kH; ++y)
+    for (int x = kPanel; x < kPanel + 10; ++x) img[(std::size_t(y) * kW + x) * 3] = img[(std::size_t(y) * kW + x) * 3 + 1] = img[(std::size_t(y) * kW + x) * 3 + 2] = 0;
+  WritePng(path, kW, kH, img);
+}
+
 std::string LoadAverage() {
   std::ifstream f("/proc/loadavg");
   std::string a, b, c;
@@ -444,37 +554,44 @@ int main(int argc, char** argv) {
     for (const Variant& v : Variants(ablation)) {
       results.push_back(Run(s, v, full, out, frames));
       Picture(results.back(), out / fmt::format("{}_{}.png", s, v.label));
+      if (!results.back().ice_mesh.empty()) {
+        SurfacePicture(results.back(), out / fmt::format("{}_{}_surface.png", s, v.label));
+        if (frames) rime::io::WriteMesh(out / fmt::format("{}_{}_ice.obj", s, v.label), results.back().ice_mesh);
+      }
       std::printf("  %s/%s done in %.0f s\n", s.c_str(), v.label.c_str(), results.back().wall_s);
       std::fflush(stdout);
     }
-  std::printf("\n%-6s %-9s %6s %6s %7s %7s %7s %7s %7s %7s %7s %7s %7s %7s %6s\n", "scene", "method", "water", "ice", "on", "ground",
-              "bits", "specks", "speck", "removed", "airborn", "off-obj", "rough", "thick", "wall");
-  std::printf("%-6s %-9s %6s %6s %7s %7s %7s %7s %7s %7s %7s %7s %7s %7s %6s\n", "", "", "start", "", "sphere", "only", "<=3", "(ptcl)", "groups", "",
-              "", "", "mm", "mm", "s");
+  std::printf("\n%-6s %-9s %6s %6s %7s %7s %7s %7s %7s %7s %7s %7s %7s %7s %7s %7s %6s\n", "scene", "method", "water", "ice", "on", "ground",
+              "bits", "specks", "speck", "removed", "airborn", "off-obj", "rough", "thick", "s-rough", "s-thick", "wall");
+  std::printf("%-6s %-9s %6s %6s %7s %7s %7s %7s %7s %7s %7s %7s %7s %7s %7s %7s %6s\n", "", "", "start", "", "sphere", "only", "<=3", "(ptcl)", "groups", "",
+              "", "", "mm", "mm", "mm", "mm", "s");
   std::ofstream csv(out / "results.csv");
   csv << "scene,method,ok,water_initial,ice,ice_components,speck_components,specks,ice_sphere_attached,ice_ground_only,bits,removed,airborne,off_object,fluid_end,"
-         "ice_on_sphere,covered_bins,bins,roughness_mm,mean_thickness_mm,max_average_density_error,steps,wall_s\n";
+         "ice_on_sphere,covered_bins,bins,roughness_mm,mean_thickness_mm,surface_roughness_mm,surface_thickness_mm,surface_triangles,"
+         "max_average_density_error,steps,wall_s\n";
   std::string json = fmt::format("{{\n  \"run\": \"{}\",\n  \"results\": [\n", run_info);
   for (std::size_t k = 0; k < results.size(); ++k) {
     const Result& r = results[k];
-    std::printf("%-6s %-9s %6lld %6lld %7lld %7lld %7lld %7lld %7lld %7lld %7lld %7lld %7.1f %7.1f %6.0f%s\n", r.scene.c_str(), r.method.c_str(),
+    std::printf("%-6s %-9s %6lld %6lld %7lld %7lld %7lld %7lld %7lld %7lld %7lld %7lld %7.1f %7.1f %7.1f %7.1f %6.0f%s\n", r.scene.c_str(), r.method.c_str(),
                 (long long)r.water_initial, (long long)r.ice, (long long)r.ice_sphere_attached, (long long)r.ice_ground_only,
                 (long long)r.bits, (long long)r.specks, (long long)r.speck_components, (long long)r.removed, (long long)r.airborne, (long long)r.off_object,
-                r.roughness_mm, r.mean_thickness_mm, r.wall_s,
+                r.roughness_mm, r.mean_thickness_mm, r.surface_roughness_mm, r.surface_thickness_mm, r.wall_s,
                 r.ok ? "" : "  FAILED");
-    csv << fmt::format("{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.3f},{:.3f},{:.5f},{},{:.1f}\n", r.scene, r.method, r.ok,
+    csv << fmt::format("{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.3f},{:.3f},{:.3f},{:.3f},{},{:.5f},{},{:.1f}\n", r.scene, r.method, r.ok,
                        r.water_initial, r.ice, r.ice_components, r.speck_components, r.specks, r.ice_sphere_attached, r.ice_ground_only,
                        r.bits, r.removed, r.airborne, r.off_object,
                        r.fluid_end, r.ice_on_sphere, r.covered_bins, r.bins, r.roughness_mm, r.mean_thickness_mm,
-                       r.max_average_density_error, r.steps, r.wall_s);
+                       r.surface_roughness_mm, r.surface_thickness_mm, r.surface_triangles, r.max_average_density_error, r.steps, r.wall_s);
     json += fmt::format(
         "    {{\"scene\": \"{}\", \"method\": \"{}\", \"ok\": {}, \"error\": \"{}\", \"simulated_s\": {:.4f}, \"water_initial\": {}, "
         "\"ice\": {}, \"ice_components\": {}, \"speck_components\": {}, \"specks\": {}, \"ice_sphere_attached\": {}, \"ice_ground_only\": {}, \"bits\": {}, \"removed\": {}, \"airborne\": {}, "
         "\"off_object\": {}, \"fluid_end\": {}, \"ice_on_sphere\": {}, \"covered_bins\": {}, \"bins\": {}, \"roughness_mm\": {:.3f}, "
-        "\"mean_thickness_mm\": {:.3f}, \"max_average_density_error\": {:.5f}, \"finite\": {}, \"steps\": {}, \"wall_s\": {:.1f}}}{}\n",
+        "\"mean_thickness_mm\": {:.3f}, \"surface_roughness_mm\": {:.3f}, \"surface_thickness_mm\": {:.3f}, \"surface_triangles\": {}, "
+        "\"max_average_density_error\": {:.5f}, \"finite\": {}, \"steps\": {}, \"wall_s\": {:.1f}}}{}\n",
         r.scene, r.method, r.ok, r.error, r.sim_time, r.water_initial, r.ice, r.ice_components, r.speck_components, r.specks, r.ice_sphere_attached,
         r.ice_ground_only, r.bits, r.removed, r.airborne, r.off_object, r.fluid_end, r.ice_on_sphere, r.covered_bins, r.bins, r.roughness_mm, r.mean_thickness_mm,
-        r.max_average_density_error, r.finite, r.steps, r.wall_s, k + 1 < results.size() ? "," : "");
+        r.surface_roughness_mm, r.surface_thickness_mm, r.surface_triangles, r.max_average_density_error, r.finite, r.steps, r.wall_s,
+        k + 1 < results.size() ? "," : "");
   }
   json += "  ]\n}\n";
   std::ofstream(out / "results.json") << json;
