@@ -762,7 +762,8 @@ void Simulation<T>::NonPressureAccelerations(double dt) {
   exec::ParallelFor(device_, n,
                     kernels::AdvectVelocity<T>{s.v.data(), s.accel.data(), T(dt), s.FB(), s.x.data(), s.bx.data(), s.bv.data(),
                                                s.bpsi.data(), s.density.data(), wall_coefficient, h, T(scene_.viscosity.epsilon),
-                                               T(scene_.fluid.rest_density), scene_.viscosity.limiter, CubicSpline<T>(h), s.v_adv.data()});
+                                               T(scene_.fluid.rest_density), scene_.viscosity.limiter, CubicSpline<T>(h), s.FF(),
+                                               s.pressure_previous.data(), mass, s.v_adv.data()});
 }
 
 template <class T>
@@ -1171,15 +1172,21 @@ void Simulation<T>::Restore(const io::ParticleFrame& f) {
     std::vector<std::uint8_t> ivalid, ikind;
     std::vector<double> itime;
     std::vector<freeze::Sym6<T>> id6;
+    // Akinci volumes as the run had them: a run updates them only within 2h of new ice, with another
+    // summation order than a full recomputation, so recomputing them would not resume bit-identically.
+    const std::vector<T>* volume = f.attributes.count("volume") ? &f.Get<T>("volume") : nullptr;
+    std::vector<T> solid_volume, ice_volume;
     for (std::size_t i = 0; i < x.size(); ++i) {
       if (phase[i] == static_cast<std::uint8_t>(io::Phase::kBoundary)) {
         if (solid >= hfilm.size()) throw InputError("checkpoint holds more solid particles than the boundary files", f.source);
+        if (volume) solid_volume.push_back((*volume)[i]);
         hfilm[solid] = film[i];
         hgrowth[solid] = growth[i];
         hvalid[solid] = valid[i];
         ++solid;
       } else if (phase[i] == static_cast<std::uint8_t>(io::Phase::kIce)) {
         ix.push_back(x[i]);
+        if (volume) ice_volume.push_back((*volume)[i]);
         il.push_back(local[i]);
         io_.push_back(object[i]);
         iid.push_back(id[i]);
@@ -1212,7 +1219,14 @@ void Simulation<T>::Restore(const io::ParticleFrame& f) {
       Append(device_, s.ice_d, id6);
       s.ice_count = Index(ix.size());
       s.boundary_grid.Build(s.bx.data(), s.nb(), T(2 * scene_.fluid.smoothing_length()), lattice_origin_);
-      RecomputeBoundaryVolumes();
+      if (volume) {
+        solid_volume.insert(solid_volume.end(), ice_volume.begin(), ice_volume.end());
+        s.bvol.assign(solid_volume);
+        s.bpsi.resize(s.nb());
+        FinishBoundaryVolumes();
+      } else {
+        RecomputeBoundaryVolumes();
+      }
     }
   }
   UpdateBoundaryMotion(time_);

@@ -54,25 +54,63 @@ double MaxSpeed(const Simulation<T>& sim) {
   return m;
 }
 
+// Kinetic plus potential energy of the water, J.
+template <class T>
+double MechanicalEnergy(const Simulation<T>& sim, const io::Scene& scene) {
+  const double m = scene.fluid.particle_mass();
+  const auto x = sim.Positions();
+  const auto v = sim.Velocities();
+  double e = 0;
+  for (std::size_t i = 0; i < x.size(); ++i) e += m * (0.5 * double(Dot(v[i], v[i])) - Dot(scene.solver.gravity, Vec3d(x[i])));
+  return e;
+}
+
 TEST(Iisph, BlockAtRestStaysAtRest) {
   io::Scene scene = test::ColumnScene(0.02, 8, 8, 8, 0.3);
   scene.modules = {"gravity", "viscosity"};
   auto sim = MakeColumn<float>(scene, 8, 8, 8, 0.3);
   ASSERT_EQ(sim->fluid_count(), 512);
+  auto mean_speed = [&] {
+    double mean = 0;
+    for (const auto& v : sim->Velocities()) mean += Norm(v) / sim->fluid_count();
+    return mean;
+  };
   StepStats last;
-  while (sim->time() < 1.0 - 1e-9) last = sim->Step(sim->NextTimeStep(1.0));
-  const double speed = MaxSpeed(*sim);
-  double mean = 0;
-  for (const auto& v : sim->Velocities()) mean += Norm(v) / sim->fluid_count();
-  RecordProperty("max_speed_after_1s", std::to_string(speed));
-  std::printf("block at rest: after 1 s max speed %.3g m/s, mean speed %.3g m/s, average density error %.3g%%, %d iterations\n",
-              speed, mean, 100 * last.average_density_error, last.pressure_iterations);
-  // The 1e-3 m/s is not reached: the cubic start lattice rearranges into a denser packing
-  // in bursts that release potential energy (the mean height drops), and the paper's sticky walls
-  // (β0b = 1) shear the block against them. Neither a tighter η (1e-5) nor a hydrostatic initial
-  // pressure removes it; with β0b = 0.1 the block is at 0.009 m/s after 1 s. This bounds what is.
-  EXPECT_LT(speed, 0.05);
-  EXPECT_LT(mean, 0.01);
+  auto run_to = [&](double t) {
+    while (sim->time() < t - 1e-9) last = sim->Step(sim->NextTimeStep(t));
+  };
+  run_to(1.0);
+  const double speed_1s = MaxSpeed(*sim), mean_1s = mean_speed();
+  run_to(4.0);
+  const double energy_4s = MechanicalEnergy(*sim, scene);
+  run_to(8.0);
+  const double energy_8s = MechanicalEnergy(*sim, scene), speed_8s = MaxSpeed(*sim), mean_8s = mean_speed();
+  RecordProperty("max_speed_after_1s", std::to_string(speed_1s));
+  RecordProperty("max_speed_after_8s", std::to_string(speed_8s));
+  std::printf("block at rest: max / mean speed after 1 s %.3g / %.3g m/s, after 8 s %.3g / %.3g m/s; mechanical energy 4 s -> 8 s "
+              "%+.3g mJ; average density error %.3g%%, %d iterations\n",
+              speed_1s, mean_1s, speed_8s, mean_8s, 1e3 * (energy_8s - energy_4s), 100 * last.average_density_error, last.pressure_iterations);
+  // The 1e-3 m/s after 1 s is not reached, and no solver setting reaches it: the cubic
+  // start lattice is no equilibrium of the discrete model. Even an exactly converged first step
+  // (3000 Jacobi iterations) lets every other layer fall at about 0.9 g (the SPH gradient and divergence
+  // couple only neighbouring layers, so alternating layers are nearly invisible to the density
+  // constraint), the top layer, 15 % under-dense with p = 0, sinks 0.4 d_p into the hollows below
+  // until it reaches ρ0, and the floor layer moves 0.07 d_p closer to the floor. That releases
+  // 60–80 mJ of potential energy (the centroid drops 0.07–0.1 d_p), which viscosity takes seconds to
+  // remove; the fastest particles are in the top layers then.
+  // Bounds: the run is chaotic; perturbing the start by 1e-4..3e-3 d_p or running in double gave
+  // 0.026-0.051 / 0.0049-0.0064 m/s here, and 0.0047-0.013 / 0.0008-0.0016 m/s at 8 s.
+  EXPECT_LT(speed_1s, 0.06);
+  EXPECT_LT(mean_1s, 0.008);
+  // What must hold: nothing feeds the motion once the lattice has settled. The wall viscosity used
+  // to act on v + Δt g before the pressure solve and so held wall-adjacent water up by friction; the
+  // block then circulated (up along the walls, down inside), mechanical energy rose by 2 mJ between
+  // 4 and 8 s (in 5 of the 6 perturbed runs), and it kept 5-20 mm/s for 20 s. Now the energy keeps
+  // falling (by 0.6-1.9 mJ) and what is left is the η = 0.1 % solve's breathing (about 1 mm/s, the
+  // whole block in phase).
+  EXPECT_LT(energy_8s, energy_4s);
+  EXPECT_LT(speed_8s, 0.02);
+  EXPECT_LT(mean_8s, 0.002);
   EXPECT_LT(last.average_density_error, scene.solver.eta);
   EXPECT_EQ(sim->removed_total(), 0);
 }
