@@ -3,8 +3,8 @@
 // ParticlesToLevelSet + volumeToMesh on the same particles.
 //
 // Usage: rime_surface_bench [--sizes 50000,500000,2000000] [--runs 3] [--threads N] [--sheet] [--openvdb] [--json FILE]
-// --threads caps the worker threads (default: all cores); at --threads 1 "per core" is measured
-// directly instead of divided out of a shared machine's parallel run.
+// --threads caps the worker threads (default: the CPUs the process may use); at --threads 1 "per
+// core" is measured directly instead of divided out of a shared machine's parallel run.
 // Peak memory is measured in a child process per case (fork), so cases do not inherit each
 // other's peaks. The parent never runs TBB: a child forked after TBB has started its workers gets
 // none and runs every parallel loop on one thread (this benchmark measured one core until the
@@ -13,6 +13,7 @@
 #include <openvdb/tools/ParticlesToLevelSet.h>
 #include <openvdb/tools/VolumeToMesh.h>
 #include <tbb/global_control.h>
+#include <tbb/info.h>
 #include <sys/resource.h>
 #ifdef __GLIBC__
 #include <malloc.h>
@@ -30,7 +31,6 @@
 #include <random>
 #include <stdexcept>
 #include <string>
-#include <thread>
 #include <vector>
 
 #include "rime/surface/reconstruct.h"
@@ -217,7 +217,7 @@ int main(int argc, char** argv) {
   bool openvdb_baseline = false;
   std::string json_path = "surface_bench.json";
   bool sheet = false;
-  int threads = int(std::thread::hardware_concurrency());
+  int threads = tbb::info::default_concurrency();  // the CPUs this process may use (taskset narrows it)
   for (int a = 1; a < argc; ++a) {
     const std::string arg = argv[a];
     if (arg == "--sizes" && a + 1 < argc) {
