@@ -263,6 +263,22 @@ struct AirPressureAcceleration {
   }
 };
 
+/// a_i^p of Eq. 12 for the pressures p: symmetric between water particles, Akinci pressure
+/// mirroring at boundary particles.
+template <class T>
+RIME_HDI Vec3<T> PressureAcceleration(Index i, const Pairs<T>& ff, const Pairs<T>& fb, const T* p, const T* density,
+                                      const T* boundary_psi, T mass) {
+  const T rhoi = density[i], pi_term = p[i] / (rhoi * rhoi);
+  Vec3<T> a{};
+  for (std::uint32_t k = ff.offsets[i], e = ff.offsets[i + 1]; k < e; ++k) {
+    const std::uint32_t j = ff.index[k];
+    const T rhoj = density[j];
+    a -= ff.grad[k] * (mass * (pi_term + p[j] / (rhoj * rhoj)));
+  }
+  for (std::uint32_t k = fb.offsets[i], e = fb.offsets[i + 1]; k < e; ++k) a -= fb.grad[k] * (boundary_psi[fb.index[k]] * pi_term);
+  return a;
+}
+
 /// v* = v + Δt a^np, then the fluid–boundary viscosity of spec §5.4 applied implicitly per particle,
 /// K_ib = −Ψ_b β0b β1 h φ_ib /(ρ̄_ib (r²+εh²)) x_ib x_ibᵀ, M_i = Σ_b K_ib, evaluated at the velocity
 /// the particle will have at the end of the step:
@@ -299,15 +315,8 @@ struct AdvectVelocity {
       v_adv[i] = v_star;
       return;
     }
-    const T rhoi = density[i], pi_term = pressure_previous[i] / (rhoi * rhoi);
-    Vec3<T> pressure_accel{};
-    for (std::uint32_t k = ff.offsets[i], e = ff.offsets[i + 1]; k < e; ++k) {
-      const std::uint32_t j = ff.index[k];
-      const T rhoj = density[j];
-      pressure_accel -= ff.grad[k] * (mass * (pi_term + pressure_previous[j] / (rhoj * rhoj)));
-    }
-    for (std::uint32_t k = fb.offsets[i], e = fb.offsets[i + 1]; k < e; ++k) pressure_accel -= fb.grad[k] * (boundary_psi[fb.index[k]] * pi_term);
-    const Vec3<T> v_pred = v_star + pressure_accel * dt;
+    const T rhoi = density[i];
+    const Vec3<T> v_pred = v_star + PressureAcceleration(i, ff, fb, pressure_previous, density, boundary_psi, mass) * dt;
     Mat3<T> system = Mat3<T>::Identity();
     Vec3<T> rhs = v_pred;
     const Vec3<T> xi = x[i];
@@ -443,14 +452,7 @@ struct IntegratePressure {
   Vec3<T>* x;
   T* pressure_previous;
   RIME_HD void operator()(Index i) const {
-    const T rhoi = density[i], pi_term = pressure[i] / (rhoi * rhoi);
-    Vec3<T> a{};
-    for (std::uint32_t k = ff.offsets[i], e = ff.offsets[i + 1]; k < e; ++k) {
-      const std::uint32_t j = ff.index[k];
-      const T rhoj = density[j];
-      a -= ff.grad[k] * (mass * (pi_term + pressure[j] / (rhoj * rhoj)));
-    }
-    for (std::uint32_t k = fb.offsets[i], e = fb.offsets[i + 1]; k < e; ++k) a -= fb.grad[k] * (boundary_psi[fb.index[k]] * pi_term);
+    const Vec3<T> a = PressureAcceleration(i, ff, fb, pressure, density, boundary_psi, mass);
     const Vec3<T> vi = v_adv[i] + a * dt;
     v[i] = vi;
     x[i] += vi * dt;
