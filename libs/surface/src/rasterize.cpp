@@ -426,15 +426,16 @@ RasterOutput Rasterize(const Plan& plan, const FieldInputs& in, const std::vecto
 // number of voxels filled.
 std::uint64_t FillEnclosedVoids(openvdb::FloatTree& tree, openvdb::MaskTree& inside, const openvdb::MaskTree& shallow,
                                 const openvdb::MaskTree& far, float dx) {
-  openvdb::MaskTree reached(far);
-  std::uint64_t previous = reached.activeVoxelCount();
-  openvdb::MaskTree outside(shallow);
-  outside.topologyUnion(far);
   // Shallow voxels connected to the outside are reached within a few steps; a pocket still
-  // unreached after 12 (a crack under 2 voxels wide and over 12 deep) is closed as well.
-  for (int iteration = 0; iteration < 12; ++iteration) {
+  // unreached after 12 (a crack under 2 voxels wide and over 12 deep) is closed as well. The far
+  // outside (large) is dilated once; after that only the reached shallow shell (thin) grows.
+  openvdb::MaskTree reached(far);
+  openvdb::tools::dilateActiveValues(reached, 1, openvdb::tools::NN_FACE, openvdb::tools::IGNORE_TILES);
+  reached.topologyIntersection(shallow);
+  std::uint64_t previous = reached.activeVoxelCount();
+  for (int iteration = 1; iteration < 12 && previous > 0; ++iteration) {
     openvdb::tools::dilateActiveValues(reached, 1, openvdb::tools::NN_FACE, openvdb::tools::IGNORE_TILES);
-    reached.topologyIntersection(outside);
+    reached.topologyIntersection(shallow);
     const std::uint64_t now = reached.activeVoxelCount();
     if (now == previous) break;
     previous = now;
