@@ -241,7 +241,7 @@ PreparedParticles Prepare(const ParticleSet& particles, const Settings& settings
     return out;
   }
   // Cell by cell: the 27 neighbour cells are looked up once for all particles of a cell (in grid
-  // order, so slot = index), and up to kLanes of its particles are summed side by side (SIMD across
+  // order, so slot = index), and up to kSumLanes of its particles are summed side by side (SIMD across
   // particles, candidates in sequence, as the boundary volumes). Each particle's sums add the same
   // terms in the same order whatever the thread count.
   std::vector<float> sx(n), sy(n), sz(n);

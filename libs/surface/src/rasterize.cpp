@@ -618,7 +618,9 @@ Result Reconstruct(const ParticleSet& particles, const Settings& settings) {
   in.volume = float(volume / (dx * dx * dx));
   in.iso = float(settings.iso);
   in.interior = prepared.interior.data();
-  in.deep_tiles = settings.deep_interior_tiles && !settings.keep_voids && settings.field != Field::kKernelSum;
+  // Deep leaves are at least a leaf (8 voxels) inside: only for bands well within that.
+  in.deep_tiles = settings.deep_interior_tiles && !settings.keep_voids && settings.field != Field::kKernelSum &&
+                  settings.half_band <= 4;
   const bool want_velocity = settings.velocity_grid && !particles.velocities.empty();
   in.track_nearest = want_velocity;
   const double t_plan = Seconds(t0);

@@ -53,8 +53,8 @@ struct Settings {
   bool mesh = true;             // extract the triangle mesh
   bool mesh_velocities = false; // per-vertex velocity interpolated from particles (PLY)
   bool keep_voids = false;      // keep enclosed voids (gaps between ellipsoids) in the level set and mesh
-  bool deep_interior_tiles = true;  // ellipsoids/isotropic without keep_voids: leaves deep inside a body
-                                    // become interior tiles without evaluating the field (same result)
+  bool deep_interior_tiles = true;  // ellipsoids/isotropic, no keep_voids, half_band <= 4: leaves deep inside
+                                    // a body become interior tiles without evaluating the field (same result)
 };
 
 /// One phase of one frame, ready for reconstruction.
