@@ -351,7 +351,13 @@ Result Run(const std::string& which, const Variant& v, bool full, const fs::path
   const Roughness rough = MeasureRoughness(r.ice_attached, dp);
   r.roughness_mm = rough.rms_mm, r.mean_thickness_mm = rough.mean_height_mm;
   r.covered_bins = rough.covered_bins, r.bins = rough.bins, r.ice_on_sphere = rough.points;
-  if (r.finite) MeasureSurfaceRoughness(f, ice_on_sphere_component, dp, r);
+  if (r.finite) {
+    try {
+      MeasureSurfaceRoughness(f, ice_on_sphere_component, dp, r);
+    } catch (const Error& e) {  // a failed reconstruction fails this run, not the comparison
+      r.ok = false, r.error += std::string(" reconstruction: ") + e.what();
+    }
+  }
   return r;
 }
 
