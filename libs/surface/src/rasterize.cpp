@@ -454,22 +454,19 @@ std::uint64_t FillEnclosedVoids(openvdb::FloatTree& tree, openvdb::MaskTree& ins
   return filled;
 }
 
-// Interior depth from chessboard erosions of the inside mask: a voxel that survives k erosions is
-// at least k voxels from the nearest outside voxel. Deeper than the band: inactive −background.
-void BuildInteriorBand(openvdb::FloatTree& tree, const openvdb::MaskTree& inside, float band_voxels, float dx) {
+// Interior depth from chessboard erosions of the inside mask (consumed): a voxel that survives k
+// erosions is at least k voxels from the nearest outside voxel. Deeper than the band: inactive
+// −background.
+void BuildInteriorBand(openvdb::FloatTree& tree, openvdb::MaskTree& inside, float band_voxels, float dx) {
   const int layers = int(std::ceil(band_voxels));
-  std::vector<openvdb::MaskTree> eroded;
-  openvdb::MaskTree current(inside);
-  for (int k = 1; k <= layers; ++k) {
-    openvdb::tools::erodeActiveValues(current, 1, openvdb::tools::NN_FACE_EDGE_VERTEX, openvdb::tools::IGNORE_TILES);
-    eroded.push_back(current);
-  }
   const float background = band_voxels * dx;
   openvdb::tree::LeafManager<openvdb::FloatTree> manager(tree);
-  manager.foreach([&](openvdb::FloatTree::LeafNodeType& leaf, std::size_t) {
-    for (int k = 1; k <= layers; ++k) {
-      const auto* mask = eroded[k - 1].probeConstLeaf(leaf.origin());
-      if (!mask) break;
+  // Erodes `inside` in place, one layer at a time, and applies each layer before the next.
+  for (int k = 1; k <= layers; ++k) {
+    openvdb::tools::erodeActiveValues(inside, 1, openvdb::tools::NN_FACE_EDGE_VERTEX, openvdb::tools::IGNORE_TILES);
+    manager.foreach([&](openvdb::FloatTree::LeafNodeType& leaf, std::size_t) {
+      const auto* mask = inside.probeConstLeaf(leaf.origin());
+      if (!mask) return;
       for (auto it = mask->cbeginValueOn(); it; ++it) {
         const openvdb::Index v = it.pos();
         if (k == layers) {
@@ -478,8 +475,8 @@ void BuildInteriorBand(openvdb::FloatTree& tree, const openvdb::MaskTree& inside
           leaf.setValueOnly(v, std::min(leaf.getValue(v), -float(k) * dx));
         }
       }
-    }
-  });
+    });
+  }
 }
 
 }  // namespace
