@@ -44,6 +44,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <utility>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
@@ -367,6 +368,13 @@ int Run(const Options& o, const Config& cfg) {
   return ok ? 0 : 1;
 }
 
+// The whole of `text` as one number.
+bool ParseNumber(const char* text, double& out) {
+  char* end;
+  out = std::strtod(text, &end);
+  return end != text && *end == '\0';
+}
+
 bool ParseList(const char* text, std::vector<double>& out) {
   out.clear();
   for (const char* p = text; *p;) {
@@ -387,32 +395,27 @@ int main(int argc, char** argv) {
       "usage: rime_validation_droplet [--full] [--model akinci2013|he2014] [--epsilon E1,E2,..] [--radii R1,R2,.. (in h)] [--beta0 B] "
       "[--mu MU] [--dt-max DT] [--periods P] [--max-time T] [--settle N] [--trace]";
   Config cfg;
+  double settle = cfg.settle_steps;
+  // Flags with a value; the rest (--full, --trace, --help) go to ParseOptions.
+  const std::pair<const char*, double*> numbers[] = {{"--beta0", &cfg.beta0},   {"--periods", &cfg.periods}, {"--dt-max", &cfg.dt_max},
+                                                     {"--max-time", &cfg.max_time}, {"--mu", &cfg.mu},        {"--settle", &settle}};
+  const std::pair<const char*, std::vector<double>*> lists[] = {{"--epsilon", &cfg.epsilons}, {"--radii", &cfg.radii}};
   std::vector<char*> rest{argv[0]};
   for (int i = 1; i < argc; ++i) {
-    const bool has_value = i + 1 < argc;
-    if (!std::strcmp(argv[i], "--model") && has_value) {
-      cfg.model = argv[++i];
-      if (cfg.model != "akinci2013" && cfg.model != "he2014") return std::printf("%s\n", usage), 2;
-    } else if (!std::strcmp(argv[i], "--epsilon") && has_value) {
-      if (!ParseList(argv[++i], cfg.epsilons)) return std::printf("%s\n", usage), 2;
-    } else if (!std::strcmp(argv[i], "--beta0") && has_value) {
-      cfg.beta0 = std::atof(argv[++i]);
-    } else if (!std::strcmp(argv[i], "--periods") && has_value) {
-      cfg.periods = std::atof(argv[++i]);
-    } else if (!std::strcmp(argv[i], "--radii") && has_value) {
-      if (!ParseList(argv[++i], cfg.radii)) return std::printf("%s\n", usage), 2;
-    } else if (!std::strcmp(argv[i], "--dt-max") && has_value) {
-      cfg.dt_max = std::atof(argv[++i]);
-    } else if (!std::strcmp(argv[i], "--max-time") && has_value) {
-      cfg.max_time = std::atof(argv[++i]);
-    } else if (!std::strcmp(argv[i], "--mu") && has_value) {
-      cfg.mu = std::atof(argv[++i]);
-    } else if (!std::strcmp(argv[i], "--settle") && has_value) {
-      cfg.settle_steps = std::atoi(argv[++i]);
-    } else {
-      rest.push_back(argv[i]);
+    const auto flag = [&](const char* name) { return i + 1 < argc && !std::strcmp(argv[i], name); };
+    bool taken = false, ok = true;
+    for (const auto& [name, value] : numbers)
+      if (!taken && flag(name)) taken = true, ok = ParseNumber(argv[++i], *value);
+    for (const auto& [name, value] : lists)
+      if (!taken && flag(name)) taken = true, ok = ParseList(argv[++i], *value);
+    if (!taken && flag("--model")) {
+      taken = true, cfg.model = argv[++i];
+      ok = cfg.model == "akinci2013" || cfg.model == "he2014";
     }
+    if (!ok || settle < 0 || settle != std::floor(settle)) return std::printf("%s\n", usage), 2;
+    if (!taken) rest.push_back(argv[i]);
   }
+  cfg.settle_steps = int(settle);
   const Options o = ParseOptions(int(rest.size()), rest.data(), usage);
   PrintRunInfo("oscillating droplet vs Rayleigh (l = 2)", o);
   return Run(o, cfg);

@@ -40,6 +40,11 @@ TEST(CubicSpline, ValuesAndContinuity) {
     EXPECT_NEAR(CubicSpline<double>::ShapeDerivative(q - 1e-9), CubicSpline<double>::ShapeDerivative(q + 1e-9), 1e-7);
   }
   for (double q = 0; q < 2.5; q += 0.01) EXPECT_GE(CubicSpline<double>::Shape(q), 0.0);
+  // The branch-free form (vectorised loops) is the same function, knots and outside included.
+  for (double q = 0; q < 3; q += 0.03125) {
+    EXPECT_DOUBLE_EQ(CubicSpline<double>::ShapeBranchFree(q), CubicSpline<double>::Shape(q)) << q;
+    EXPECT_FLOAT_EQ(CubicSpline<float>::ShapeBranchFree(float(q)), CubicSpline<float>::Shape(float(q))) << q;
+  }
 }
 
 TEST(CubicSpline, GradientMatchesFiniteDifferenceAndIsAntisymmetric) {

@@ -92,10 +92,7 @@ struct LaneSums {
       const float rx = xj - x[l], ry = yj - y[l], rz = zj - z[l];
       const float r2 = rx * rx + ry * ry + rz * rz;
       const bool in = (r2 < r2max) & (l != self);
-      // Branch-free cubic spline B(q) (same values as CubicSpline::Shape).
-      const float q = std::sqrt(r2) * kernel.inv_h;
-      const float a = std::max(2.0f - q, 0.0f), b = std::max(1.0f - q, 0.0f);
-      const float w = in ? kernel.w_norm * (a * a * a - 4.0f * b * b * b) : 0.0f;
+      const float w = in ? kernel.w_norm * CubicSpline<float>::ShapeBranchFree(std::sqrt(r2) * kernel.inv_h) : 0.0f;
       weight[l] += w;
       fx[l] += rx * w, fy[l] += ry * w, fz[l] += rz * w;
       if constexpr (kSecondMoments) {

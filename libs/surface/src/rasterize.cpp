@@ -144,8 +144,7 @@ struct FieldInputs {
   float volume = 0;                  // kernel sum: V / Δx³
   float iso = 0.5f;
   bool track_nearest = false;
-  const std::uint8_t* interior = nullptr;  // per particle: fully surrounded (Prepare)
-  bool deep_tiles = false;                 // see DeepLeaves
+  const std::uint8_t* interior = nullptr;  // per particle: fully surrounded (Prepare); null: no DeepLeaves
 };
 
 // Leaves that lie deep inside: the leaf and its 26 neighbour leaves all hold particles, and every
@@ -157,7 +156,7 @@ struct FieldInputs {
 // off, the only mode this is used in) drops from level set and mesh anyway.
 std::vector<std::uint8_t> DeepLeaves(const Plan& plan, const FieldInputs& in) {
   std::vector<std::uint8_t> deep(plan.targets.size(), 0);
-  if (!in.deep_tiles || !in.interior) return deep;
+  if (!in.interior) return deep;
   const std::size_t bins = plan.bin_start.size() - 1;
   std::vector<std::uint8_t> surrounded(bins);
   exec::cpu::ParallelFor(Index(bins), [&](Index b) {
@@ -614,10 +613,10 @@ Result Reconstruct(const ParticleSet& particles, const Settings& settings) {
   const double volume = particles.particle_volume > 0 ? particles.particle_volume : std::pow(particles.spacing, 3);
   in.volume = float(volume / (dx * dx * dx));
   in.iso = float(settings.iso);
-  in.interior = prepared.interior.data();
   // Deep leaves are at least a leaf (8 voxels) inside: only for bands well within that.
-  in.deep_tiles = settings.deep_interior_tiles && !settings.keep_voids && settings.field != Field::kKernelSum &&
-                  settings.half_band <= 4;
+  const bool deep_tiles = settings.deep_interior_tiles && !settings.keep_voids && settings.field != Field::kKernelSum &&
+                          settings.half_band <= 4;
+  in.interior = deep_tiles ? prepared.interior.data() : nullptr;
   const bool want_velocity = settings.velocity_grid && !particles.velocities.empty();
   in.track_nearest = want_velocity;
   const double t_plan = Seconds(t0);

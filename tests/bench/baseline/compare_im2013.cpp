@@ -427,11 +427,21 @@ void WritePng(const fs::path& path, int w, int h, const std::vector<std::uint8_t
   chunk("IEND", {});
 }
 
+// Both pictures: two square panels (top view left, side view right) with a black gap between.
+constexpr int kPanel = 480, kGap = 10, kH = kPanel, kW = 2 * kPanel + kGap;
+
+std::vector<std::uint8_t> BlankPanels() { return std::vector<std::uint8_t>(std::size_t(kW) * kH * 3, 255); }
+
+void WritePanels(const fs::path& path, std::vector<std::uint8_t>& img) {
+  for (int y = 0; y < kH; ++y)
+    for (int x = kPanel; x < kPanel + kGap; ++x) std::memset(&img[(std::size_t(y) * kW + x) * 3], 0, 3);
+  WritePng(path, kW, kH, img);
+}
+
 // Top view (x right, y up) and side view (x right, z up) side by side, 1.6 m x 1.6 m each.
 // Grey: solids; light blue: water; dark blue: ice attached to a solid; red: specks.
 void Picture(const Result& r, const fs::path& path) {
-  constexpr int kPanel = 480, kH = kPanel, kW = 2 * kPanel + 10;
-  std::vector<std::uint8_t> img(std::size_t(kW) * kH * 3, 255);
+  std::vector<std::uint8_t> img = BlankPanels();
   const double scale = kPanel / 1.6;
   auto put = [&](double u, double v, int ox, std::array<std::uint8_t, 3> c, int rad) {  // u, v in [-0.8, 0.8] m
     const int px = ox + int((u + 0.8) * scale), py = kH - 1 - int((v + 0.8) * scale);
@@ -446,7 +456,7 @@ void Picture(const Result& r, const fs::path& path) {
     for (const Vec3d& q : p) {
       if (side && std::fabs(q.y) > 0.1) continue;  // side view: a 20 cm slab through the sphere's centre
       if (!side && q.z < 0.01 && c[0] == 200) continue;  // top view: leave the ground out
-      put(q.x, side ? q.z - 0.7 : q.y, side ? kPanel + 10 : 0, c, rad);  // side: z from -0.1 m up
+      put(q.x, side ? q.z - 0.7 : q.y, side ? kPanel + kGap : 0, c, rad);  // side: z from -0.1 m up
     }
   };
   for (bool side : {false, true}) {
@@ -455,23 +465,21 @@ void Picture(const Result& r, const fs::path& path) {
     layer(r.ice_attached, {20, 40, 160}, 2, side);
     layer(r.ice_specks, {220, 20, 20}, 2, side);
   }
-  for (int y = 0; y < kH; ++y)
-    for (int x = kPanel; x < kPanel + 10; ++x) img[(std::size_t(y) * kW + x) * 3] = img[(std::size_t(y) * kW + x) * 3 + 1] = img[(std::size_t(y) * kW + x) * 3 + 2] = 0;
-  WritePng(path, kW, kH, img);
+  WritePanels(path, img);
 }
 
 // The reconstructed ice on the sphere, shaded, in two views 0.8 m wide around the sphere (top:
 // looking down −z; side: looking along +y, z from 0 to 0.8 m), over the sphere (ray-cast) and
 // the ground. Orthographic, z-buffered.
 void SurfacePicture(const Result& r, const fs::path& path) {
-  constexpr int kPanel = 480, kH = kPanel, kW = 2 * kPanel + 10;
   constexpr double kHalf = 0.4, kSideZ0 = 0.4;  // m: half width; the side view's centre height
-  std::vector<std::uint8_t> img(std::size_t(kW) * kH * 3, 255);
+  std::vector<std::uint8_t> img = BlankPanels();
   const double scale = kPanel / (2 * kHalf);
   const Vec3d light = Vec3d(-0.4, -0.5, 0.77) / Norm(Vec3d(-0.4, -0.5, 0.77));
   for (int view = 0; view < 2; ++view) {
-    const int ox = view ? kPanel + 10 : 0;
-    // Panel coordinates: u = x; v = y (top) or z - 0.7 (side); depth towards the viewer.
+    const int ox = view ? kPanel + kGap : 0;
+    const Vec3d toward_viewer = view ? Vec3d(0, -1, 0) : Vec3d(0, 0, 1);
+    // Panel coordinates: u = x; v = y (top) or z − kSideZ0 (side); depth towards the viewer.
     const auto project = [&](const Vec3d& p, double& px, double& py, double& depth) {
       px = (p.x + kHalf) * scale, py = kH - 1 - ((view ? p.z - kSideZ0 : p.y) + kHalf) * scale, depth = view ? -p.y : p.z;
     };
@@ -501,6 +509,7 @@ void SurfacePicture(const Result& r, const fs::path& path) {
       Vec3d n = Cross(p1 - p0, p2 - p0);
       if (Norm(n) == 0) continue;
       n = n / Norm(n);
+      if (Dot(n, toward_viewer) < 0) n = -n;  // light the side that faces the viewer
       double x[3], y[3], d[3];
       project(p0, x[0], y[0], d[0]), project(p1, x[1], y[1], d[1]), project(p2, x[2], y[2], d[2]);
       const int x0 = std::max(0, int(std::floor(std::min({x[0], x[1], x[2]})))), x1 = std::min(kPanel - 1, int(std::ceil(std::max({x[0], x[1], x[2]}))));
@@ -514,14 +523,11 @@ void SurfacePicture(const Result& r, const fs::path& path) {
           const double w1 = ((x[2] - px) * (y[0] - py) - (x[0] - px) * (y[2] - py)) / area;
           const double w2 = 1 - w0 - w1;
           if (w0 < 0 || w1 < 0 || w2 < 0) continue;
-          shade(X, Y, w0 * d[0] + w1 * d[1] + w2 * d[2], view ? Vec3d(n.x, n.y, n.z) * (n.y > 0 ? -1.0 : 1.0) : n * (n.z < 0 ? -1.0 : 1.0),
-                {120, 190, 255});
+          shade(X, Y, w0 * d[0] + w1 * d[1] + w2 * d[2], n, {120, 190, 255});
         }
     }
   }
-  for (int y = 0; y < kH; ++y)
-    for (int x = kPanel; x < kPanel + 10; ++x) img[(std::size_t(y) * kW + x) * 3] = img[(std::size_t(y) * kW + x) * 3 + 1] = img[(std::size_t(y) * kW + x) * 3 + 2] = 0;
-  WritePng(path, kW, kH, img);
+  WritePanels(path, img);
 }
 
 std::string LoadAverage() {

@@ -35,6 +35,12 @@ struct CubicSpline {
     const T b = T(1) - q;
     return a * a * a - T(4) * b * b * b;
   }
+  /// B(q) without branches, for loops the compiler should vectorise (the same polynomial pieces:
+  /// the clamped terms are exactly zero outside their range).
+  RIME_HDI static T ShapeBranchFree(T q) {
+    const T a = q < T(2) ? T(2) - q : T(0), b = q < T(1) ? T(1) - q : T(0);
+    return a * a * a - T(4) * b * b * b;
+  }
   /// B'(q).
   RIME_HDI static T ShapeDerivative(T q) {
     if (q >= T(2)) return T(0);
