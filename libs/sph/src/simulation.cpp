@@ -673,11 +673,13 @@ double Simulation<T>::NextTimeStep(double next_stop) const {
     // Initialize refused a scene whose explicit limit lies below dt_min, so clamping keeps it.
     dt = std::clamp(std::min(dt, ExplicitStepLimit(scene_, modules_).first), solver.dt_min, solver.dt_max);
   }
+  // Equal steps up to the stop, none longer than dt: the step then stays the same from frame to
+  // frame for water at rest. A shortened step at every stop (the remainder, or half of it) jolted
+  // resting water at each output frame: the pressure that holds wall-adjacent particles scales
+  // with 1/Δt² (spec §6's a_ii), so a sudden change of Δt unbalances it.
   const double remaining = next_stop - time_;
-  if (remaining <= dt * (1 + 1e-9)) return std::max(remaining, 1e-12);
-  // Avoid a tiny last step before the stop: split the remainder evenly.
-  if (remaining < 2 * dt) return remaining / 2;
-  return dt;
+  const double steps = std::ceil(remaining / dt * (1 - 1e-9));
+  return steps > 1 ? remaining / steps : std::max(remaining, 1e-12);
 }
 
 template <class T>
