@@ -136,14 +136,14 @@ int Run(const rime::io::Scene& scene, const Options& opt, const rime::tool::Comm
   sim.EnableTimings(true);
   const auto wall_start = std::chrono::steady_clock::now();
   std::int64_t total_steps = 0, total_iterations = 0, particle_steps = 0, removed = 0;
-  double max_speed = 0, worst_error = 0;
+  double max_speed = 0, worst_error = 0, measured_sum = 0;
   Progress progress("frames", last_frame - first_frame);
   FrameWriter writer;
   for (std::int64_t f = first_frame + 1; f <= last_frame; ++f) {
     const double stop = f / fps;
     const auto frame_start = std::chrono::steady_clock::now();
     std::int64_t steps = 0, iterations = 0, max_iterations = 0;
-    double dt_min = 1e30, dt_max = 0, sum_error = 0, max_error = 0, frame_speed = 0;
+    double dt_min = 1e30, dt_max = 0, sum_error = 0, sum_measured = 0, max_error = 0, frame_speed = 0;
     while (sim.time() < stop - 1e-9 * std::max(1.0, stop)) {
       if (g_interrupted) throw Error(ExitCode::kInterrupted, fmt::format("interrupted during frame {}; frames up to {} are complete", f, f - 1));
       const double dt = sim.NextTimeStep(stop);
@@ -159,6 +159,7 @@ int Run(const rime::io::Scene& scene, const Options& opt, const rime::tool::Comm
       max_iterations = std::max<std::int64_t>(max_iterations, s.pressure_iterations);
       dt_min = std::min(dt_min, s.dt), dt_max = std::max(dt_max, s.dt);
       sum_error += s.average_density_error;
+      sum_measured += s.measured_density_error;
       max_error = std::max(max_error, s.max_density_error);
       frame_speed = std::max(frame_speed, s.max_speed);
       particle_steps += s.fluid_particles;
@@ -177,6 +178,7 @@ int Run(const rime::io::Scene& scene, const Options& opt, const rime::tool::Comm
                  {"pressure_iterations_max", max_iterations},
                  {"density_error_mean", steps ? sum_error / steps : 0},
                  {"density_error_max", max_error},
+                 {"density_error_measured_mean", steps ? sum_measured / steps : 0},
                  {"max_speed", frame_speed},
                  {"fluid_particles", sim.fluid_count()},
                  {"ice_particles", sim.ice_count()},
@@ -192,6 +194,7 @@ int Run(const rime::io::Scene& scene, const Options& opt, const rime::tool::Comm
     });
     total_steps += steps;
     total_iterations += iterations;
+    measured_sum += sum_measured;
     max_speed = std::max(max_speed, frame_speed);
     worst_error = std::max(worst_error, max_error);
     progress.Update(f - first_frame, fmt::format("t={:.3f}s", sim.time()));
@@ -201,9 +204,10 @@ int Run(const rime::io::Scene& scene, const Options& opt, const rime::tool::Comm
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - wall_start).count();
   const auto& t = sim.timings();
   const double us_per_particle_step = particle_steps ? 1e6 * wall / double(particle_steps) : 0;
-  log::Info("done: {} frames, {} steps, {:.2f} pressure iterations/step, max speed {:.3g} m/s, {} water, {} ice, {} particles left the domain",
-            last_frame - first_frame, total_steps, total_steps ? double(total_iterations) / total_steps : 0.0, max_speed, sim.fluid_count(),
-            sim.ice_count(), removed);
+  log::Info("done: {} frames, {} steps, {:.2f} pressure iterations/step, measured density error {:.3g}% on average, max speed {:.3g} m/s, "
+            "{} water, {} ice, {} particles left the domain",
+            last_frame - first_frame, total_steps, total_steps ? double(total_iterations) / total_steps : 0.0,
+            total_steps ? 100 * measured_sum / double(total_steps) : 0.0, max_speed, sim.fluid_count(), sim.ice_count(), removed);
   const double total = std::max(1e-12, t.total());
   log::Info("time: {} total, {:.3g} us per particle-step (neighbors {:.0f}%, forces {:.0f}%, pressure {:.0f}%, integration {:.0f}%, "
             "freezing {:.0f}%), peak memory {} MiB, {} threads",
@@ -218,6 +222,7 @@ int Run(const rime::io::Scene& scene, const Options& opt, const rime::tool::Comm
                               {"pressure_iterations_mean", total_steps ? double(total_iterations) / total_steps : 0},
                               {"max_speed", max_speed},
                               {"density_error_max", worst_error},
+                              {"density_error_measured_mean", total_steps ? measured_sum / double(total_steps) : 0},
                               {"fluid_particles", sim.fluid_count()},
                               {"boundary_particles", sim.boundary_count()},
                               {"removed_particles", sim.removed_total()},

@@ -947,9 +947,13 @@ StepStats Simulation<T>::Step(double dt) {
     PhaseTimer t(device_, timing_enabled_, timings_.neighbor_search);
     NeighborSearch();
   }
+  double measured_error = 0;
   {
     PhaseTimer t(device_, timing_enabled_, timings_.non_pressure);
     ComputeDensity();
+    s.scratch.resize(s.n());
+    exec::ParallelFor(device_, s.n(), kernels::Compression<T>{s.density_error.data(), s.scratch.data()});
+    measured_error = exec::Sum(device_, s.scratch.data(), s.n()) / double(s.n()) / scene_.fluid.rest_density;
     NonPressureAccelerations(dt);
   }
   StepStats solve;
@@ -959,6 +963,7 @@ StepStats Simulation<T>::Step(double dt) {
   }
   solve.emitted_particles = stats.emitted_particles;
   stats = solve;
+  stats.measured_density_error = measured_error;
   {
     PhaseTimer t(device_, timing_enabled_, timings_.integration);
     Integrate(dt);

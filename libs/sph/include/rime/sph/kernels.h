@@ -80,6 +80,14 @@ struct Density {
   }
 };
 
+/// max(0, ρ_i − ρ0): the compression the particle actually has (for the measured density error).
+template <class T>
+struct Compression {
+  const T* density_error;
+  T* compression;
+  RIME_HD void operator()(Index i) const { compression[i] = density_error[i] > T(0) ? density_error[i] : T(0); }
+};
+
 /// accel_i = g (the start of every step's non-pressure accelerations; gravity module off → 0).
 template <class T>
 struct InitAcceleration {
@@ -568,7 +576,7 @@ struct CompactionOrder {
 
 // Kernels of both precisions; Gather for every attribute type that is reordered.
 #define RIME_SPH_KERNELS_T(X, T)                                                                                   \
-  X(rime::sph::kernels::PairValues<T>) X(rime::sph::kernels::Density<T>) X(rime::sph::kernels::InitAcceleration<T>) \
+  X(rime::sph::kernels::PairValues<T>) X(rime::sph::kernels::Density<T>) X(rime::sph::kernels::Compression<T>) X(rime::sph::kernels::InitAcceleration<T>) \
   X(rime::sph::kernels::ViscosityAcceleration<T>) X(rime::sph::kernels::SurfaceColor<T>)                           \
   X(rime::sph::kernels::SurfaceEnergy<T>) X(rime::sph::kernels::SurfaceTensionAcceleration<T>)                     \
   X(rime::sph::kernels::AkinciNormal<T>) X(rime::sph::kernels::AkinciSurfaceTensionAcceleration<T>)                 \
