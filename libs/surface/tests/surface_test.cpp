@@ -171,8 +171,9 @@ TEST(Prepare, EllipsoidsAreScaledToUnitVolumeUpToSmax) {
       const auto gap = [k](const Vec3f& v) {
         return std::min(std::fabs(v[k] - v[(k + 1) % 3]), std::fabs(v[k] - v[(k + 2) % 3])) / v[k];
       };
-      if (gap(inv_stored) > 0.1f && gap(inv) > 0.1f)
+      if (gap(inv_stored) > 0.1f && gap(inv) > 0.1f) {
         EXPECT_NEAR(std::fabs(Dot(axes.Column(k), axes_stored.Column(k))), 1.0f, 1e-3f) << i;
+      }
     }
     widened += 1 / inv.z > 1 / inv_stored.z * 1.05f;
   }

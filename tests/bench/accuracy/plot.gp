@@ -14,7 +14,7 @@ preset(g) = (strcol(1) eq "preset")
 knob(g) = ok(0) && !preset(0)
 do for [plot_id = 1:3] {
   if (plot_id == 1) { set output dir."/pareto_front.png"; set title "Dam break: surge-front error against the reference run vs cost"; set ylabel "mean |Z - Z_ref| / Z_ref, %"; col = 19; scale = 100 }
-  if (plot_id == 2) { set output dir."/pareto_density.png"; set title "Dam break: mean average density error over the run vs cost"; set ylabel "mean density error, %"; col = 16; scale = 100 }
+  if (plot_id == 2) { set output dir."/pareto_density.png"; set title "Dam break: measured average density error over the run vs cost"; set ylabel "mean measured density error, %"; col = 28; scale = 100 }
   if (plot_id == 3) { set output dir."/pareto_position.png"; set title "Dam break: front particles' distance from the reference run (same spacing) vs cost"; set ylabel "mean displacement, d_p"; col = 21; scale = 1 }
   plot dir."/results.csv" every ::1 using (knob(0) ? $12 : NaN):(column(col)*scale) with points pt 7 ps 1.0 lc rgb "#888888" title "one knob / candidate", \
        "" every ::1 using (knob(0) ? $12 : NaN):(column(col)*scale):2 with labels offset 0,0.7 font ",7" tc rgb "#555555" notitle, \
