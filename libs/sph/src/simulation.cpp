@@ -675,8 +675,9 @@ double Simulation<T>::NextTimeStep(double next_stop) const {
   }
   // Equal steps up to the stop, none longer than dt: the step then stays the same from frame to
   // frame for water at rest. A shortened step at every stop (the remainder, or half of it) jolted
-  // resting water at each output frame: the pressure that holds wall-adjacent particles scales
-  // with 1/Δt² (spec §6's a_ii), so a sudden change of Δt unbalances it.
+  // resting water at each output frame (Iisph.OutputFramesDoNotJoltWaterAtRest). Likely why: with
+  // spec §6's default a_ii, water next to walls stays compressed, and the pressure the solve keeps
+  // on it scales with 1/Δt², so a sudden change of Δt unbalances it.
   const double remaining = next_stop - time_;
   const double steps = std::ceil(remaining / dt * (1 - 1e-9));
   return steps > 1 ? remaining / steps : std::max(remaining, 1e-12);

@@ -120,8 +120,7 @@ TEST(Iisph, BlockAtRestStaysAtRest) {
 
 // Output frames must not jolt water at rest. NextTimeStep used to shorten only the last one or two
 // steps before each frame time, so under the adaptive step Δt jumped (4.9 -> 3.0 -> 4.9 ms) at
-// every frame; the pressure holding the wall-adjacent water scales with 1/Δt², so each jump kicked
-// the block. On this 8³ block at 24/25 fps the kinetic energy at the frames of 3-5 s was 986/3600 µJ
+// every frame, and each jump kicked the block. On this 8³ block at 24/25 fps the kinetic energy at the frames of 3-5 s was 986/3600 µJ
 // on average (max speed at 5 s 0.030/0.062 m/s); with equal steps up to each frame 10.2/10.4 µJ
 // (0.0039/0.0033 m/s).
 TEST(Iisph, OutputFramesDoNotJoltWaterAtRest) {

@@ -41,7 +41,8 @@ struct StepStats {
   double max_density_error = 0;  // relative, max over fluid particles
   // Measured: the same average from the kernel-sum densities at the start of this step, i.e. what
   // the previous step's pressures actually achieved. With the default a_ii (spec §6 "splishsplash")
-  // it is about 2-3 times the prediction: the solve counts wall particles as pushed by p_i.
+  // it is 2-4 times the prediction: the estimate reports about (1 − ω) of the residual, and the
+  // solve counts wall particles as pushed by p_i.
   double measured_density_error = 0;
   double max_speed = 0;              // m/s after the step
   std::int64_t fluid_particles = 0;
