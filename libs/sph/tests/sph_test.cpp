@@ -88,8 +88,9 @@ TEST(Iisph, BlockAtRestStaysAtRest) {
   RecordProperty("max_speed_after_1s", std::to_string(speed_1s));
   RecordProperty("max_speed_after_8s", std::to_string(speed_8s));
   std::printf("block at rest: max / mean speed after 1 s %.3g / %.3g m/s, after 8 s %.3g / %.3g m/s; mechanical energy 4 s -> 8 s "
-              "%+.3g mJ; average density error %.3g%%, %d iterations\n",
-              speed_1s, mean_1s, speed_8s, mean_8s, 1e3 * (energy_8s - energy_4s), 100 * last.average_density_error, last.pressure_iterations);
+              "%+.3g mJ; average density error %.3g%% predicted, %.3g%% measured, %d iterations\n",
+              speed_1s, mean_1s, speed_8s, mean_8s, 1e3 * (energy_8s - energy_4s), 100 * last.average_density_error,
+              100 * last.measured_density_error, last.pressure_iterations);
   // The 1e-3 m/s after 1 s is not reached, and no solver setting reaches it: the cubic
   // start lattice is no equilibrium of the discrete model. Even an exactly converged first step
   // (3000 Jacobi iterations) lets every other layer fall at about 0.9 g (the SPH gradient and divergence
@@ -114,6 +115,8 @@ TEST(Iisph, BlockAtRestStaysAtRest) {
   EXPECT_LT(energy_8s, energy_4s);
   EXPECT_LT(speed_8s, 0.02);
   EXPECT_LT(mean_8s, 0.002);
+  // The "average density error below η" holds for the solve's prediction (what η is
+  // checked against); the measured compression of this block is 0.27 % at 8 s (printed; README, stats.jsonl).
   EXPECT_LT(last.average_density_error, scene.solver.eta);
   EXPECT_EQ(sim->removed_total(), 0);
 }
