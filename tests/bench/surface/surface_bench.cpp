@@ -142,6 +142,7 @@ double CpuSeconds() {
 struct Measure {
   double seconds = 0, prepare = 0, rasterize = 0, mesh = 0, cpu_seconds = 0;
   std::uint64_t triangles = 0, active_voxels = 0;
+  std::uint64_t estimate_bytes = 0;  // surface::EstimateMemoryBytes (what --memory-budget checks)
 };
 
 Measure RunRime(const surface::ParticleSet& set) {
@@ -155,6 +156,7 @@ Measure RunRime(const surface::ParticleSet& set) {
   m.mesh = r.stats.seconds_mesh;
   m.triangles = r.stats.triangles;
   m.active_voxels = r.stats.active_voxels;
+  m.estimate_bytes = surface::EstimateMemoryBytes(set, settings);
   return m;
 }
 
@@ -246,8 +248,8 @@ int main(int argc, char** argv) {
   nlohmann::json results = nlohmann::json::array();
   std::printf("threads: %d, voxel = spacing/2, shape: %s, median of %d runs (by wall time); M/cpu-s = particles per CPU-second (user+sys, robust to a shared machine)\n", threads, sheet ? "jittered two-layer ice sheet" : "jittered ice ball", runs);
   // prepare = centre smoothing + D (rime only), field = rasterizing the level set.
-  std::printf("%-24s %10s %9s %9s %9s %9s %9s %10s %9s %12s %11s %10s\n", "method", "particles", "wall s", "prepare s", "field s",
-              "mesh s", "cpu s", "M part/s", "per core", "M/cpu-s", "triangles", "peak MB");  // MB = 1e6 bytes
+  std::printf("%-24s %10s %9s %9s %9s %9s %9s %10s %9s %12s %11s %10s %8s\n", "method", "particles", "wall s", "prepare s", "field s",
+              "mesh s", "cpu s", "M part/s", "per core", "M/cpu-s", "triangles", "peak MB", "est. MB");  // MB = 1e6 bytes
   for (std::size_t n : sizes) {
     const surface::ParticleSet set = GenerateIsolated(n, sheet);
 #ifdef __GLIBC__
@@ -273,9 +275,9 @@ int main(int argc, char** argv) {
       (void)!getloadavg(load, 1);  // after the runs: the others' share of this machine
       const double rate = double(set.size()) / m.seconds / 1e6;
       const double cpu_rate = double(set.size()) / m.cpu_seconds / 1e6;
-      std::printf("%-24s %10zu %9.3f %9.3f %9.3f %9.3f %9.3f %10.3f %9.3f %12.3f %11llu %10.0f  load %.1f\n", name, set.size(),
+      std::printf("%-24s %10zu %9.3f %9.3f %9.3f %9.3f %9.3f %10.3f %9.3f %12.3f %11llu %10.0f %8.0f  load %.1f\n", name, set.size(),
                   m.seconds, m.prepare, m.rasterize, m.mesh, m.cpu_seconds, rate, rate / threads, cpu_rate,
-                  (unsigned long long)m.triangles, peak / 1e6, load[0]);
+                  (unsigned long long)m.triangles, peak / 1e6, m.estimate_bytes / 1e6, load[0]);
       std::fflush(stdout);
       results.push_back({{"method", name},
                          {"particles", set.size()},
@@ -291,6 +293,7 @@ int main(int argc, char** argv) {
                          {"triangles", m.triangles},
                          {"active_voxels", m.active_voxels},
                          {"peak_memory_bytes", peak},
+                         {"estimated_memory_bytes", m.estimate_bytes},
                          {"shape", sheet ? "two-layer sheet" : "ball"},
                          {"load_average_1min", load[0]},
                          {"note", "peak memory includes the generated particle set (~100 bytes/particle)"}});
