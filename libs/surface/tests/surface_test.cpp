@@ -487,5 +487,21 @@ TEST(Reconstruct, MemoryEstimateGrowsWithResolution) {
   EXPECT_GT(double(a), double(result.stats.grid_bytes)) << "the estimate should bound the level set it predicts";
 }
 
+// The estimate (what --memory-budget compares) must at least cover what the result holds: the
+// level set and the mesh (positions, normals, velocities, triangles), also for a thin sheet, whose
+// surface is all of its leaves (the most triangles per leaf of the benchmark's shapes).
+TEST(Reconstruct, MemoryEstimateCoversTheLevelSetAndTheMesh) {
+  for (const ParticleSet& set : {Ball(6 * kSpacing), Sheet(12)}) {
+    Settings settings;
+    const Result r = Reconstruct(set, settings);
+    const io::TriMesh& m = r.mesh;
+    const double held = double(r.stats.grid_bytes) + 12.0 * double(m.positions.size() + m.normals.size() + m.velocities.size()) +
+                        12.0 * double(m.triangles.size());
+    ASSERT_GT(m.triangles.size(), 0u);
+    std::printf("estimate %.0f kB, held %.0f kB\n", EstimateMemoryBytes(set, settings) / 1e3, held / 1e3);
+    EXPECT_GT(double(EstimateMemoryBytes(set, settings)), held) << set.size() << " particles, " << m.triangles.size() << " triangles";
+  }
+}
+
 }  // namespace
 }  // namespace rime::surface
