@@ -354,6 +354,7 @@ BakeResult Runner::Run() {
   // Progress counts tasks of about one frame's work each, so that the ETA is not thrown off by the
   // simulation (one job that takes longer than all the others): it counts as one task per output
   // frame, advanced as its frames appear; every other job is one task.
+  // The simulation's outputs are its frames (0 included), the sequence index and the stats log.
   const auto sim_frames = [&](std::size_t i) { return std::max<std::int64_t>(1, static_cast<std::int64_t>(jobs_[i].outputs.size()) - 2); };
   std::int64_t total_tasks = 0;
   std::array<std::int64_t, kStageCount> stage_total{};
@@ -379,10 +380,9 @@ BakeResult Runner::Run() {
       const std::int64_t tasks = jobs_[i].stage == Stage::kSim ? sim_frames(i) : 1;
       if (finished(i)) done += tasks, ++stage_done[static_cast<int>(jobs_[i].stage)];
       if (impl.status[i] == Status::kRunning && jobs_[i].stage == Stage::kSim) {
-        const std::int64_t frames = static_cast<std::int64_t>(jobs_[i].outputs.size()) - 2;
-        while (sim_frames_seen < frames && fs::exists(io::FramePath(layout_.sim(), "particles", sim_frames_seen, "h5part"))) ++sim_frames_seen;
-        sim_status = fmt::format("sim frame {}/{}", std::max<std::int64_t>(0, sim_frames_seen - 1), frames - 1);
-        done += std::min(tasks, sim_frames_seen);
+        while (sim_frames_seen < tasks && fs::exists(io::FramePath(layout_.sim(), "particles", sim_frames_seen, "h5part"))) ++sim_frames_seen;
+        sim_status = fmt::format("sim frame {}/{}", std::max<std::int64_t>(0, sim_frames_seen - 1), tasks - 1);
+        done += sim_frames_seen;
       }
     }
     std::string status;

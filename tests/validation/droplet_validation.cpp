@@ -78,6 +78,11 @@ struct Config {
   int settle_steps = 30;  // quasi-static steps after the stretch
   double dt_max = 0.006;  // s, spec §7 bound of the CFL step
   double mu = 1e-3;       // Pa s, Morris viscosity when the viscosity module runs
+
+  bool Akinci() const { return model == "akinci2013"; }
+  // β0 in effect: the flag's, else none with Akinci (its cohesion holds the drop) and 0.01 with He.
+  double Beta0() const { return beta0 >= 0 ? beta0 : (Akinci() ? 0.0 : 0.01); }
+  bool ExtraMu() const { return mu > 1e-3; }  // above water's: runs the viscosity module for it
 };
 
 struct Result {
@@ -120,14 +125,13 @@ double Deformation(const std::vector<Vec3<T>>& x, double radius, int* escaped = 
 }
 
 Result Oscillate(double radius_in_dp, double epsilon, const Config& cfg, bool trace) {
-  const bool akinci = cfg.model == "akinci2013";
-  const double beta0 = cfg.beta0 >= 0 ? cfg.beta0 : (akinci ? 0.0 : 0.01);
+  const double beta0 = cfg.Beta0();
   io::Scene scene;
   scene.fluid.spacing = kDp;
   scene.modules = {"surface_tension"};
   if (beta0 > 0) scene.modules.insert("viscosity"), scene.viscosity.beta0 = beta0;
   scene.viscosity.mu = cfg.mu;
-  if (cfg.mu > 1e-3) scene.modules.insert("viscosity");
+  if (cfg.ExtraMu()) scene.modules.insert("viscosity");
   scene.solver.dt_max = cfg.dt_max;
   scene.surface_tension.model = cfg.model;
   scene.surface_tension.gamma = cfg.gamma;
@@ -264,11 +268,10 @@ int Run(const Options& o, const Config& cfg) {
   std::vector<double> radii = o.full ? std::vector<double>{4, 5, 6, 8, 10, 12} : std::vector<double>{4, 6, 8};
   if (!cfg.radii.empty()) radii = cfg.radii;
   const std::vector<double> epsilons = cfg.epsilons.empty() ? std::vector<double>{0.2, 0.25, 0.3, 0.35, 0.4} : cfg.epsilons;
-  const bool akinci = cfg.model == "akinci2013";
-  const double beta0 = cfg.beta0 >= 0 ? cfg.beta0 : (akinci ? 0.0 : 0.01);
-  const std::string model = akinci ? fmt::format("gamma = {:.3g}", cfg.gamma) : fmt::format("kappa = {:.3g} N", cfg.kappa);
+  const double beta0 = cfg.Beta0();
+  const std::string model = cfg.Akinci() ? fmt::format("gamma = {:.3g}", cfg.gamma) : fmt::format("kappa = {:.3g} N", cfg.kappa);
   std::string viscosity = beta0 > 0 ? fmt::format("beta0 = {:.3g} (nu_eff = {:.2g} m^2/s)", beta0, beta0 * kDp) : "none";
-  if (cfg.mu > 1e-3) viscosity += fmt::format(", mu = {:.3g} Pa s", cfg.mu);
+  if (cfg.ExtraMu()) viscosity += fmt::format(", mu = {:.3g} Pa s", cfg.mu);
   std::string eps_list;
   for (double e : epsilons) eps_list += fmt::format("{}{:.3g}", eps_list.empty() ? "" : ", ", e);
   std::printf("d_p = h = %.3g m, rho0 = %.0f kg/m^3, no gravity; surface tension %s (%s); viscosity %s;\n"
@@ -333,7 +336,7 @@ int Run(const Options& o, const Config& cfg) {
   std::printf("total wall time %.1f s (%u runs on %u threads; wall (s) above: each run's own, concurrent with others)\n", total.seconds(),
               unsigned(jobs.size()), workers);
 
-  // Per radius: the mean undamped period of the runs that were measured.
+  // Per radius: the median undamped period of the runs that were measured.
   std::printf("\n  R/h   runs  median T0 (s)  spread (s)  T0/R^1.5 (s/m^1.5)  damping (1/s)  sigma_eff (N/m)\n");
   std::vector<double> log_r, log_p, sigmas;
   bool measured = true;

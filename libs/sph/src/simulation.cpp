@@ -707,7 +707,7 @@ void Simulation<T>::NeighborSearch() {
 }
 
 template <class T>
-void Simulation<T>::ComputeDensity() {
+double Simulation<T>::ComputeDensity() {
   State& s = *state_;
   const Index n = s.n();
   s.density.resize(n);
@@ -715,6 +715,9 @@ void Simulation<T>::ComputeDensity() {
   const CubicSpline<T> kernel(T(scene_.fluid.smoothing_length()));
   exec::ParallelFor(device_, n, kernels::Density<T>{s.FF(), s.FB(), s.bpsi.data(), T(scene_.fluid.particle_mass()), kernel.W0(),
                                                      T(scene_.fluid.rest_density), s.density.data(), s.density_error.data()});
+  s.scratch.resize(n);
+  exec::ParallelFor(device_, n, kernels::Compression<T>{s.density_error.data(), s.scratch.data()});
+  return exec::Sum(device_, s.scratch.data(), n) / double(n) / scene_.fluid.rest_density;
 }
 
 template <class T>
@@ -951,10 +954,7 @@ StepStats Simulation<T>::Step(double dt) {
   double measured_error = 0;
   {
     PhaseTimer t(device_, timing_enabled_, timings_.non_pressure);
-    ComputeDensity();
-    s.scratch.resize(s.n());
-    exec::ParallelFor(device_, s.n(), kernels::Compression<T>{s.density_error.data(), s.scratch.data()});
-    measured_error = exec::Sum(device_, s.scratch.data(), s.n()) / double(s.n()) / scene_.fluid.rest_density;
+    measured_error = ComputeDensity();
     NonPressureAccelerations(dt);
   }
   StepStats solve;

@@ -537,6 +537,47 @@ std::string LoadAverage() {
   return a + " " + b + " " + c;
 }
 
+// One result's measures in the JSON's order, each written once for both files: CSV columns are
+// the ones not marked json_only, in the same order; text values are quoted in the JSON.
+struct Field {
+  const char* name;
+  std::string value;
+  bool json_only = false, text = false;
+};
+
+std::vector<Field> Fields(const Result& r) {
+  const auto n = [](auto v) { return fmt::format("{}", v); };
+  return {{"scene", r.scene, false, true},
+          {"method", r.method, false, true},
+          {"ok", n(r.ok)},
+          {"error", r.error, true, true},
+          {"simulated_s", fmt::format("{:.4f}", r.sim_time), true},
+          {"water_initial", n(r.water_initial)},
+          {"ice", n(r.ice)},
+          {"ice_components", n(r.ice_components)},
+          {"speck_components", n(r.speck_components)},
+          {"specks", n(r.specks)},
+          {"ice_sphere_attached", n(r.ice_sphere_attached)},
+          {"ice_ground_only", n(r.ice_ground_only)},
+          {"bits", n(r.bits)},
+          {"removed", n(r.removed)},
+          {"airborne", n(r.airborne)},
+          {"off_object", n(r.off_object)},
+          {"fluid_end", n(r.fluid_end)},
+          {"ice_on_sphere", n(r.ice_on_sphere)},
+          {"covered_bins", n(r.covered_bins)},
+          {"bins", n(r.bins)},
+          {"roughness_mm", fmt::format("{:.3f}", r.roughness_mm)},
+          {"mean_thickness_mm", fmt::format("{:.3f}", r.mean_thickness_mm)},
+          {"surface_roughness_mm", fmt::format("{:.3f}", r.surface_roughness_mm)},
+          {"surface_thickness_mm", fmt::format("{:.3f}", r.surface_thickness_mm)},
+          {"surface_triangles", n(r.surface_triangles)},
+          {"max_average_density_error", fmt::format("{:.5f}", r.max_average_density_error)},
+          {"finite", n(r.finite), true},
+          {"steps", n(r.steps)},
+          {"wall_s", fmt::format("{:.1f}", r.wall_s)}};
+}
+
 }  // namespace
 }  // namespace rime::compare
 
@@ -578,9 +619,10 @@ int main(int argc, char** argv) {
   std::printf("%-6s %-9s %6s %6s %7s %7s %7s %7s %7s %7s %7s %7s %7s %7s %7s %7s %6s\n", "", "", "start", "", "sphere", "only", "<=3", "(ptcl)", "groups", "",
               "", "", "mm", "mm", "mm", "mm", "s");
   std::ofstream csv(out / "results.csv");
-  csv << "scene,method,ok,water_initial,ice,ice_components,speck_components,specks,ice_sphere_attached,ice_ground_only,bits,removed,airborne,off_object,fluid_end,"
-         "ice_on_sphere,covered_bins,bins,roughness_mm,mean_thickness_mm,surface_roughness_mm,surface_thickness_mm,surface_triangles,"
-         "max_average_density_error,steps,wall_s\n";
+  std::string header;
+  for (const Field& f : Fields(Result{}))
+    if (!f.json_only) header += (header.empty() ? "" : ",") + std::string(f.name);
+  csv << header << "\n";
   std::string json = fmt::format("{{\n  \"run\": \"{}\",\n  \"results\": [\n", run_info);
   for (std::size_t k = 0; k < results.size(); ++k) {
     const Result& r = results[k];
@@ -589,21 +631,13 @@ int main(int argc, char** argv) {
                 (long long)r.bits, (long long)r.specks, (long long)r.speck_components, (long long)r.removed, (long long)r.airborne, (long long)r.off_object,
                 r.roughness_mm, r.mean_thickness_mm, r.surface_roughness_mm, r.surface_thickness_mm, r.wall_s,
                 r.ok ? "" : "  FAILED");
-    csv << fmt::format("{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.3f},{:.3f},{:.3f},{:.3f},{},{:.5f},{},{:.1f}\n", r.scene, r.method, r.ok,
-                       r.water_initial, r.ice, r.ice_components, r.speck_components, r.specks, r.ice_sphere_attached, r.ice_ground_only,
-                       r.bits, r.removed, r.airborne, r.off_object,
-                       r.fluid_end, r.ice_on_sphere, r.covered_bins, r.bins, r.roughness_mm, r.mean_thickness_mm,
-                       r.surface_roughness_mm, r.surface_thickness_mm, r.surface_triangles, r.max_average_density_error, r.steps, r.wall_s);
-    json += fmt::format(
-        "    {{\"scene\": \"{}\", \"method\": \"{}\", \"ok\": {}, \"error\": \"{}\", \"simulated_s\": {:.4f}, \"water_initial\": {}, "
-        "\"ice\": {}, \"ice_components\": {}, \"speck_components\": {}, \"specks\": {}, \"ice_sphere_attached\": {}, \"ice_ground_only\": {}, \"bits\": {}, \"removed\": {}, \"airborne\": {}, "
-        "\"off_object\": {}, \"fluid_end\": {}, \"ice_on_sphere\": {}, \"covered_bins\": {}, \"bins\": {}, \"roughness_mm\": {:.3f}, "
-        "\"mean_thickness_mm\": {:.3f}, \"surface_roughness_mm\": {:.3f}, \"surface_thickness_mm\": {:.3f}, \"surface_triangles\": {}, "
-        "\"max_average_density_error\": {:.5f}, \"finite\": {}, \"steps\": {}, \"wall_s\": {:.1f}}}{}\n",
-        r.scene, r.method, r.ok, r.error, r.sim_time, r.water_initial, r.ice, r.ice_components, r.speck_components, r.specks, r.ice_sphere_attached,
-        r.ice_ground_only, r.bits, r.removed, r.airborne, r.off_object, r.fluid_end, r.ice_on_sphere, r.covered_bins, r.bins, r.roughness_mm, r.mean_thickness_mm,
-        r.surface_roughness_mm, r.surface_thickness_mm, r.surface_triangles, r.max_average_density_error, r.finite, r.steps, r.wall_s,
-        k + 1 < results.size() ? "," : "");
+    std::string row, object;
+    for (const Field& f : Fields(r)) {
+      if (!f.json_only) row += (row.empty() ? "" : ",") + f.value;
+      object += fmt::format("{}\"{}\": ", object.empty() ? "" : ", ", f.name) + (f.text ? "\"" + f.value + "\"" : f.value);
+    }
+    csv << row << "\n";
+    json += "    {" + object + "}" + (k + 1 < results.size() ? "," : "") + "\n";
   }
   json += "  ]\n}\n";
   std::ofstream(out / "results.json") << json;

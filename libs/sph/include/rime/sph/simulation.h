@@ -105,7 +105,7 @@ class Simulation {
 
  private:
   void NeighborSearch();
-  void ComputeDensity();
+  double ComputeDensity();  // returns the measured average compression (StepStats::measured_density_error)
   void NonPressureAccelerations(double dt);
   StepStats SolvePressure(double dt, double omega);
   void Integrate(double dt);
