@@ -101,7 +101,8 @@ TEST(Iisph, BlockAtRestStaysAtRest) {
   // A lid (a closed tank) halves the speed at 1 s (0.022 m/s), η 1e-4 or 1e-5 changes nothing
   // (0.048 m/s). Once the block has settled it does stay at rest: SettledBlockStaysAtRest.
   // Bounds: the run is chaotic; perturbing the start by 1e-4..3e-3 d_p or running in double gave
-  // 0.026-0.051 / 0.0049-0.0064 m/s here (0.049 / 0.0050 with min_iterations = 3).
+  // 0.026-0.051 / 0.0049-0.0064 m/s here (0.049 / 0.0050 with min_iterations = 3), and
+  // 0.0047-0.013 / 0.0008-0.0016 m/s at 8 s.
   EXPECT_LT(speed_1s, 0.06);
   EXPECT_LT(mean_1s, 0.008);
   // What must hold: nothing feeds the motion once the lattice has settled. The wall viscosity used
@@ -128,7 +129,9 @@ TEST(Iisph, BlockAtRestStaysAtRest) {
 // after 2 iterations in most steps, and a block that sinks as a whole compresses only its floor
 // layer, which the average error hardly sees. η 1e-4 also stops it (0.76 mm/s, 11 iterations per
 // step instead of 3). The default stays at 2 because 3 flips the growth direction in
-// Freezing.IceFollowsTheFlowDirection (its youngest ice then lies upstream).
+// Freezing.IceFollowsTheFlowDirection (its youngest ice then lies upstream). A lid on the box (a
+// sealed tank, inward normals) does not settle this well: 0.88 mm/s after 30 s, but 1.5 and 6 mm/s
+// after 40 and 50 s (not investigated).
 // The measured compression stays at 0.23 % (the splishsplash a_ii; printed), the predicted below η.
 TEST(Iisph, SettledBlockStaysAtRest) {
   io::Scene scene = test::ColumnScene(0.02, 8, 8, 8, 0.3);
