@@ -123,8 +123,8 @@ TEST(Iisph, BlockAtRestStaysAtRest) {
 // The criterion, for a block that is at rest: the 8³ block above, left to settle from its
 // lattice for 30 s, then watched for 1 s, with min_iterations = 3 (the setting for calm water;
 // README). Max speed over that second 0.31 mm/s (0.28-0.68 mm/s when the start is perturbed by
-// 1e-4 to 3e-2 d_p; 0.76 mm/s after 20 s of settling, 6.8 mm/s after 10 s: the lattice's disorder
-// takes that long). At the default minimum of 2 iterations (Ihmsen's) the block breathes instead,
+// 1e-4 to 3e-2 d_p; 0.53, 1.6 and 3.8 mm/s after 25, 20 and 10 s of settling: the lattice's
+// disorder takes that long). At the default minimum of 2 iterations (Ihmsen's) the block breathes instead,
 // the whole of it in phase, at 2.6 mm/s for as long as it runs (checked to 40 s): the solve stops
 // after 2 iterations in most steps, and a block that sinks as a whole compresses only its floor
 // layer, which the average error hardly sees. η 1e-4 also stops it (0.76 mm/s, 11 iterations per
