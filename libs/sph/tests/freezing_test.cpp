@@ -233,7 +233,11 @@ TEST(Freezing, IceFollowsTheFlowDirection) {
   EXPECT_LT(AngleToX(plus.axis), 20.0);
   EXPECT_LT(AngleToX(minus.axis), 20.0);
   EXPECT_LT(plus.growth.x * minus.growth.x, 0.0) << "flipping the flow must flip the direction of growth";
-  EXPECT_GT(plus.growth.x, 0.0) << "the youngest ice must lie downstream";
+  // Which end is youngest is not asserted here. Spec §9.5's sign grows ice against the incoming
+  // flow (windward, FreezeKernels.FreezingFractionAndEnergy tests it), yet in this 80-particle
+  // stream the youngest third's centroid lands 1-2 d_p either side with solver details: +0.048 m
+  // (downstream) at the defaults, -0.018 m with min_iterations = 3, +0.005 m at η 3e-4; a wider,
+  // longer stream (r = 0.041 m for 1.2 s, 600 ice) puts it upstream (-0.010 m) either way.
   EXPECT_LT(iso.elongation, plus.elongation) << "isotropic growth must be less elongated";
 }
 
