@@ -102,6 +102,7 @@ void ApplyQualityPreset(const std::string& quality, Scene& scene) {
     s.eta = 0.01;
     s.cfl = 0.6;
     s.dt_max = 0.01;
+    s.min_iterations = 2;  // a preview does not mind millimetre-per-second breathing at rest
     s.max_iterations = 50;
   } else if (quality == "reference") {
     s.eta = 1e-4;

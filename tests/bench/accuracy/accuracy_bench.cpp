@@ -361,6 +361,7 @@ std::vector<Setting> Settings(bool with_freezing) {
   for (double dtm : {0.002, 0.01})
     add("dt_max", fmt::format("dt_max {:g} ms", 1e3 * dtm), [=](io::Scene& sc) { sc.solver.dt_max = dtm; });
   for (int per_a : {14, 28}) add("spacing", fmt::format("a = {} d_p", per_a), none, per_a);
+  add("min_iterations", "min 2 iterations (Ihmsen; the default is 3)", [](io::Scene& sc) { sc.solver.min_iterations = 2; });
   for (double w : {0.3, 0.7}) add("omega", fmt::format("omega {:g}", w), [=](io::Scene& sc) { sc.solver.omega = w; });
   add("kernel", "h = 1.2 d_p", [](io::Scene& sc) { sc.fluid.smoothing_ratio = 1.2; });
   add("precision", "double", [](io::Scene& sc) { sc.fluid.precision = "double"; });

@@ -48,7 +48,8 @@ io::Scene DamBreak(double dp, double block, std::vector<std::string> modules) {
   return scene;
 }
 
-// min_iterations = 3 keeps water at rest from breathing (README); this case shows its cost.
+// The default minimum of 3 pressure iterations keeps settled water from breathing (README); this
+// case, at Ihmsen's 2, shows what the third costs where 2 would do.
 io::Scene MinIterations(io::Scene scene, int min_iterations) {
   scene.solver.min_iterations = min_iterations;
   return scene;
@@ -114,7 +115,7 @@ int main(int argc, char** argv) {
   std::vector<Result> results;
   const std::vector<std::pair<std::string, io::Scene>> cases = {
       {"dam break 50k", DamBreak(dp, 1.0, {"gravity"})},
-      {"dam break 50k, min 3 iterations", MinIterations(DamBreak(dp, 1.0, {"gravity"}), 3)},
+      {"dam break 50k, min 2 iterations", MinIterations(DamBreak(dp, 1.0, {"gravity"}), 2)},
       {"dam break 50k + viscosity", DamBreak(dp, 1.0, {"gravity", "viscosity"})},
       {"dam break 50k + surface tension", DamBreak(dp, 1.0, {"gravity", "surface_tension"})},
       {"dam break 50k + viscosity + freezing", DamBreak(dp, 1.0, {"gravity", "viscosity", "freezing"})},
