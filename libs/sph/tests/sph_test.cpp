@@ -98,8 +98,8 @@ TEST(Iisph, BlockAtRestStaysAtRest) {
   // lets every other layer fall at about 0.9 g; the top layer, 15 % under-dense with p = 0, sinks
   // 0.4 d_p into the hollows below, and the floor layer moves 0.07 d_p closer to the floor. That
   // releases 60-80 mJ (the centroid drops 0.07-0.1 d_p), which viscosity takes seconds to remove.
-  // A lid (a closed tank) halves the speed at 1 s (0.022 m/s), η 1e-4 or 1e-5 changes nothing
-  // (0.048 m/s). Once the block has settled it does stay at rest: SettledBlockStaysAtRest.
+  // With 2 iterations, a lid (a closed tank) halved the speed at 1 s (0.022 m/s), and η 1e-4 or
+  // 1e-5 changed nothing (0.048 m/s). Once settled, the block does stay at rest (the next test).
   // Bounds: the run is chaotic; perturbing the start by 1e-4..3e-3 d_p or running in double gave
   // 0.026-0.051 / 0.0049-0.0064 m/s here, and 0.0047-0.013 / 0.0008-0.0016 m/s at 8 s, with
   // min_iterations = 2; 0.049 / 0.0050 and 0.0034 / 0.0003 m/s with 3.
@@ -123,7 +123,7 @@ TEST(Iisph, BlockAtRestStaysAtRest) {
 // lattice for 30 s, then watched for 1 s, at the default settings. Max speed over that second
 // 0.31 mm/s (0.28-0.68 mm/s when the start is perturbed by 1e-4 to 3e-2 d_p; 0.53, 1.6 and
 // 3.8 mm/s after 25, 20 and 10 s of settling: the lattice's disorder takes that long). With
-// Ihmsen's minimum of 2 pressure iterations (the default until this test) the block breathes
+// Ihmsen's minimum of 2 pressure iterations (the default before session 6) the block breathes
 // instead, the whole of it in phase, at 2.6 mm/s for as long as it runs (checked to 40 s): the solve
 // stops after 2 iterations in most steps, and a block that sinks as a whole compresses only its
 // floor layer, which the average error hardly sees. η 1e-4 also stops it (0.76 mm/s, 11 iterations
