@@ -23,6 +23,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <map>
 #include <nlohmann/json.hpp>
 #include <string>
@@ -394,6 +395,49 @@ std::vector<Setting> Settings(bool with_freezing) {
   return v;
 }
 
+// results.csv's columns, each named once beside the value it writes, so that the header and the
+// rows cannot drift apart. plot.gp reads the columns by position: append new ones at the end.
+struct CsvColumn {
+  const char* name;
+  std::function<void(std::ostream&, const json&)> write;
+};
+
+std::vector<CsvColumn> CsvColumns() {
+  const auto text = [](const char* k) { return [k](std::ostream& o, const json& r) { o << r.at(k).get<std::string>(); }; };
+  const auto raw = [](const char* k) { return [k](std::ostream& o, const json& r) { o << r.at(k); }; };  // as JSON writes it
+  const auto real = [](const char* k, double missing) { return [k, missing](std::ostream& o, const json& r) { o << r.value(k, missing); }; };
+  const auto count = [](const char* k) { return [k](std::ostream& o, const json& r) { o << r.value(k, 0LL); }; };
+  const auto at = [](const char* k) { return [k](std::ostream& o, const json& r) { o << r.at(k).get<double>(); }; };
+  return {{"group", text("group")},
+          {"label", [](std::ostream& o, const json& r) { o << '"' << r.at("label").get<std::string>() << '"'; }},
+          {"water", count("fluid")},
+          {"dp", real("dp", 0.0)},
+          {"eta", raw("eta")},
+          {"cfl", raw("cfl")},
+          {"dt_max", raw("dt_max")},
+          {"omega", raw("omega")},
+          {"smoothing_ratio", raw("smoothing_ratio")},
+          {"precision", text("precision")},
+          {"wall_s", raw("wall_s")},
+          {"cpu_s", raw("cpu_s")},
+          {"steps", count("steps")},
+          {"mean_iterations", real("mean_iterations", 0.0)},
+          {"peak_rss_mib", raw("peak_rss_mib")},
+          {"mean_density_error", real("mean_density_error", 0.0)},
+          {"max_density_error", real("max_density_error", 0.0)},
+          {"volume_drift", real("volume_drift", 0.0)},
+          {"front_error_mean", at("front_error_mean")},
+          {"front_error_max", at("front_error_max")},
+          {"front_position_diff_dp", at("front_position_diff_dp")},
+          {"ice", count("ice")},
+          {"ice_diff", at("ice_diff")},
+          {"diverged", [](std::ostream& o, const json& r) { o << (r.value("diverged", false) ? 1 : 0); }},
+          {"hydro_slope_error", real("hydro_slope_error", NAN)},
+          {"hydro_max_speed", real("hydro_max_speed", NAN)},
+          {"ice_shape_diff_dp", real("ice_shape_diff_dp", NAN)},
+          {"mean_measured_density_error", real("mean_measured_density_error", 0.0)}};
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -532,9 +576,9 @@ int main(int argc, char** argv) {
   std::printf("%-46s %7s %6s %7s %6s %6s %8s %8s %8s %8s %7s %7s %6s %6s %7s %6s %6s\n", "setting", "water", "wall s", "CPU s", "steps",
               "iter", "MiB", "rho avg%", "rho max%", "meas avg%", "vol %", "front%", "max%", "pos", "hydro%", "ice", "shape");
   std::ofstream csv(out_dir + "/results.csv");
-  csv << "group,label,water,dp,eta,cfl,dt_max,omega,smoothing_ratio,precision,wall_s,cpu_s,steps,mean_iterations,peak_rss_mib,"
-         "mean_density_error,max_density_error,volume_drift,front_error_mean,front_error_max,front_position_diff_dp,ice,ice_diff,diverged,"
-         "hydro_slope_error,hydro_max_speed,ice_shape_diff_dp,mean_measured_density_error\n";
+  const std::vector<CsvColumn> columns = CsvColumns();
+  for (std::size_t c = 0; c < columns.size(); ++c) csv << (c ? "," : "") << columns[c].name;
+  csv << "\n";
   json out = json::array();
   for (json& r : rows) {
     const bool div = r.value("diverged", false);
@@ -547,15 +591,11 @@ int main(int argc, char** argv) {
                 100 * r["front_error_max"].get<double>(), r["front_position_diff_dp"].get<double>(),
                 100 * hydro, r["group"] == "freezing" ? std::to_string(r.value("ice", 0LL)).c_str() : "-", shape,
                 div ? "  DIVERGED" : (r.value("hydro_diverged", false) ? "  hydrostatic column DIVERGED" : ""));
-    csv << r["group"].get<std::string>() << ",\"" << r["label"].get<std::string>() << "\"," << r.value("fluid", 0LL) << ","
-        << r.value("dp", 0.0) << "," << r["eta"] << "," << r["cfl"] << "," << r["dt_max"] << "," << r["omega"] << ","
-        << r["smoothing_ratio"] << "," << r["precision"].get<std::string>() << "," << r["wall_s"] << "," << r["cpu_s"] << ","
-        << r.value("steps", 0LL) << "," << r.value("mean_iterations", 0.0) << "," << r["peak_rss_mib"] << ","
-        << r.value("mean_density_error", 0.0) << "," << r.value("max_density_error", 0.0) << "," << r.value("volume_drift", 0.0)
-        << "," << r["front_error_mean"].get<double>() << "," << r["front_error_max"].get<double>() << ","
-        << r["front_position_diff_dp"].get<double>() << "," << r.value("ice", 0LL) << "," << r["ice_diff"].get<double>() << ","
-        << (div ? 1 : 0) << "," << r.value("hydro_slope_error", NAN) << "," << r.value("hydro_max_speed", NAN) << ","
-        << r.value("ice_shape_diff_dp", NAN) << "," << r.value("mean_measured_density_error", 0.0) << "\n";
+    for (std::size_t c = 0; c < columns.size(); ++c) {
+      if (c) csv << ",";
+      columns[c].write(csv, r);
+    }
+    csv << "\n";
     r.erase("positions");
     r.erase("ice_positions");
     out.push_back(r);
