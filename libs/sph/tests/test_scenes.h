@@ -37,6 +37,31 @@ inline io::ParticleFrame BoxBoundary(double dp, double w, double d, double heigh
   return f;
 }
 
+/// Sealed tank [0,w]x[0,d]x[0,height]: the open box plus a lid, every particle carrying its
+/// inward normal (how a closed container is told from a solid when the water is placed).
+inline io::ParticleFrame SealedBoxBoundary(double dp, double w, double d, double height, double ratio = 0.5) {
+  io::ParticleFrame box = BoxBoundary(dp, w, d, height, ratio);
+  std::vector<Vec3d> p = box.GetPositions<double>();
+  const double db = ratio * dp;
+  const int nx = int(std::ceil(w / db - 1e-9)), ny = int(std::ceil(d / db - 1e-9));
+  for (int i = 1; i < nx; ++i)
+    for (int j = 1; j < ny; ++j) p.push_back({i * w / nx, j * d / ny, height});
+  const double eps = 1e-9;
+  std::vector<Vec3d> normals;
+  for (const Vec3d& q : p) {
+    const bool inner_xy = q.x > eps && q.x < w - eps && q.y > eps && q.y < d - eps;
+    if (q.z < eps) normals.push_back({0, 0, 1});
+    else if (q.z > height - eps && inner_xy) normals.push_back({0, 0, -1});
+    else if (q.x < eps) normals.push_back({1, 0, 0});
+    else if (q.x > w - eps) normals.push_back({-1, 0, 0});
+    else if (q.y < eps) normals.push_back({0, 1, 0});
+    else normals.push_back({0, -1, 0});
+  }
+  box.SetPositions(p);
+  box.SetVec3("normal", normals);
+  return box;
+}
+
 /// A scene with a water block of nx*ny*nz particles standing 1.1 d_p from the walls of a box
 /// just large enough to hold it, walls `wall_height` high.
 inline io::Scene ColumnScene(double dp, int nx, int ny, int nz, double wall_height) {
