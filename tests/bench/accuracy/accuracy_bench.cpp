@@ -207,7 +207,7 @@ json RunHydrostatic(const Setting& s) {
   std::map<std::int64_t, Vec3d> final_x;
   const auto ids = sim.Ids();
   for (std::size_t i = 0; i < x_end.size(); ++i) final_x[ids[i]] = Vec3d(x_end[i]);
-  // Slope error of the fit over the halves in `use` (both: the whole window).
+  // Slope error of the fit over the chosen halves of the window (both: the whole window).
   auto slope_error = [&](bool first, bool second) {
     std::map<std::int64_t, Sums> merged;
     for (const auto& [id, h] : sums)
