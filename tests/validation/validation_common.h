@@ -68,6 +68,12 @@ class Stopwatch {
   std::chrono::steady_clock::time_point start_ = std::chrono::steady_clock::now();
 };
 
+/// How long a hydrostatic column started on a lattice settles, and then how long its pressures
+/// are averaged (rime_validation_hydrostatic and the speed/accuracy study). A lattice is no
+/// equilibrium: after 1.5 s the column still moved at 0.11 m/s, after 3 s at a few cm/s; 3 s of
+/// averaging spans several periods of its sloshing (about 0.5 s in a 0.2 m tank).
+constexpr double kHydrostaticSettle = 3.0, kHydrostaticAverage = 3.0;
+
 struct Line {
   double slope = 0, intercept = 0;
 };

@@ -164,9 +164,9 @@ json RunSim(const Setting& s, double end_time) {
 // 8 particles, so the fit keeps some columns 2.5 d_p from the walls; d_p from the setting's
 // resolution). The lattice start is not at rest: inviscid, the column still sloshes
 // at 0.15-0.29 m/s after 6 s, which made the slope wander by ±4 % between settings. So the spec's
-// viscosity is on (gravity alone on the dam break), and the column settles 3 s, then each
-// particle's pressure and height are averaged over 3 s; p(z) is fitted over the particles at least
-// 2.5 d_p from the walls, floor and surface. Returns the slope's relative error against −ρ0 g, the
+// viscosity is on (gravity alone on the dam break), and the column settles and is then averaged
+// as the validation program's (3 s each); each particle's pressure and height are averaged, and
+// p(z) is fitted over the particles at least 2.5 d_p from the walls, floor and surface. Returns the slope's relative error against −ρ0 g, the
 // same fitted on either half of the window (their half-difference estimates the figure's noise)
 // and the fastest particle at the end.
 template <class T>
@@ -182,7 +182,8 @@ json RunHydrostatic(const Setting& s) {
   sph::Simulation<T> sim(scene, exec::Device::Cpu());
   sim.AddBoundaryObject(sph::test::BoxBoundary(dp, width, width, 0.6), "box");
   sim.Initialize();
-  const double settle = 3.0, average = 3.0, rho0 = scene.fluid.rest_density, g = 9.81;
+  const double settle = validation::kHydrostaticSettle, average = validation::kHydrostaticAverage;
+  const double rho0 = scene.fluid.rest_density, g = 9.81;
   // Per particle: pressure and height sums and the step count, for each half of the window.
   struct Sums {
     double p = 0, z = 0, n = 0;
@@ -208,16 +209,17 @@ json RunHydrostatic(const Setting& s) {
   std::map<std::int64_t, Vec3d> final_x;
   const auto ids = sim.Ids();
   for (std::size_t i = 0; i < x_end.size(); ++i) final_x[ids[i]] = Vec3d(x_end[i]);
-  // Slope error of the fit over the chosen halves of the window (both: the whole window).
-  auto slope_error = [&](bool first, bool second) {
-    std::map<std::int64_t, Sums> merged;
-    for (const auto& [id, h] : sums)
-      for (int k = 0; k < 2; ++k)
-        if (k == 0 ? first : second) merged[id].p += h[k].p, merged[id].z += h[k].z, merged[id].n += h[k].n;
+  // Slope error of the fit over halves `first`..`last` of the window (0..1: all of it).
+  auto slope_error = [&](int first, int last) {
+    std::map<std::int64_t, Sums> window;  // per particle, over those halves
     double top = 0;
-    for (const auto& [id, a] : merged) top = std::max(top, a.z / a.n);
+    for (const auto& [id, h] : sums) {
+      Sums& a = window[id];
+      for (int k = first; k <= last; ++k) a.p += h[k].p, a.z += h[k].z, a.n += h[k].n;
+      top = std::max(top, a.z / a.n);
+    }
     std::vector<double> z, p;
-    for (const auto& [id, a] : merged) {
+    for (const auto& [id, a] : window) {
       const double zi = a.z / a.n;
       const Vec3d xi = final_x[id];
       if (zi < 3.1 * dp || zi > top - 2.5 * dp || xi.x < 2.5 * dp || xi.x > width - 2.5 * dp || xi.y < 2.5 * dp || xi.y > width - 2.5 * dp)
@@ -226,8 +228,8 @@ json RunHydrostatic(const Setting& s) {
     }
     return std::pair{-validation::FitLine(z, p).slope / (rho0 * g) - 1, z.size()};
   };
-  const auto [error, particles] = slope_error(true, true);
-  const double noise = 0.5 * std::fabs(slope_error(true, false).first - slope_error(false, true).first);
+  const auto [error, particles] = slope_error(0, 1);
+  const double noise = 0.5 * std::fabs(slope_error(0, 0).first - slope_error(1, 1).first);
   double max_speed = 0;
   for (const auto& v : sim.Velocities()) max_speed = std::max(max_speed, double(Norm(v)));
   return {{"hydro_slope_error", error}, {"hydro_noise", noise}, {"hydro_max_speed", max_speed}, {"hydro_particles", particles}};
