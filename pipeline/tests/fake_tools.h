@@ -50,8 +50,9 @@ input=$1; out=$3; scene=$5
 frame=$(basename "$input" | sed -E 's/particles\.([0-9]+)\.h5part/\1/')
 if fail_here surface $((10#$frame)); then echo "rime-surface: error: no particles in frame (fake) ($input)" >&2; exit 3; fi
 mkdir -p "$out"
-phases=ice
-if section surface "$scene" | grep -q 'phase *= *"both"'; then phases="ice water"; fi
+phases="ice water"  # [surface] phase defaults to "both"
+if section surface "$scene" | grep -q 'phase *= *"ice"'; then phases=ice; fi
+if section surface "$scene" | grep -q 'phase *= *"water"'; then phases=water; fi
 for phase in $phases; do
   for ext in vdb obj ply; do
     if [ "${FAKE_EMPTY_FRAME:-}" = "$((10#$frame))" ]; then echo "# no triangles" > "$out/$phase.$frame.$ext.tmp"; else

@@ -528,6 +528,10 @@ TEST(ExtremesFreezing, EverythingFreezesWithConsistentCountsAndNoNaN) {
   scene.fluid_blocks.push_back(b);
   scene.freezing.glaze_threshold = 0;
   scene.freezing.icicle_threshold = 0;
+  // Growth against the flow, mapped: every wetted neighbour then has some energy. With the default
+  // (with the flow, clamped) water the flow points away from keeps zero energy and stays liquid.
+  scene.freezing.growth_sign = 1;
+  scene.freezing.fr_mode = "map";
   sph::Simulation<float> sim(scene, exec::Device::Cpu());
   sim.AddBoundaryObject(sph::test::BoxBoundary(dp, 0.72, 0.72, 0.2), "box");
   sim.Initialize();

@@ -36,6 +36,7 @@ struct Options {
   std::string field;
   double voxel_size = -1, r_iso = -1, lambda = -1, k_r = -1, k_s = -1, k_n = -1, iso = -1, memory_budget_gb = -1;
   int resolution = -1, n_eps = -1, smooth = -1;
+  double close = -1;
   bool velocity = false, density = false, strict = false, keep_voids = false;
   std::string formats;
 };
@@ -133,7 +134,7 @@ int main(int argc, char** argv) {
       ->required();
   app.add_option("-o,--output", o.output, "Output folder (created); writes ice.NNNN.{vdb,obj,ply} and water.NNNN.*")->required();
   app.add_option("--scene", o.scene, "Scene file whose [surface] section gives the defaults (flags override it)");
-  app.add_option("--phase", o.phase, "Which particles to surface: ice, water or both (default ice)")
+  app.add_option("--phase", o.phase, "Which particles to surface: ice, water or both (default both)")
       ->check(CLI::IsMember({"ice", "water", "both"}));
   app.add_option("--field", o.field,
                  "Field for every phase: ellipsoids (union of anisotropic ellipsoids, Eq. 41; ice default), kernel_sum "
@@ -150,7 +151,11 @@ int main(int argc, char** argv) {
   app.add_option("--kn", o.k_n, "Stretch of particles with fewer than N_eps neighbours (default 0.5; kernel_sum only: ellipsoids are scaled to the r_iso sphere volume)")->check(CLI::Range(1e-3, 10.0));
   app.add_option("--neps", o.n_eps, "Minimum neighbour count N_eps for a trusted PCA (default 6)")->check(CLI::Range(0, 1000));
   app.add_option("--iso", o.iso, "Iso value of the kernel_sum field (default 0.5)")->check(CLI::PositiveNumber);
-  app.add_option("--smooth", o.smooth, "OpenVDB level-set mean-curvature smoothing iterations (default 0)")->check(CLI::Range(0, 100));
+  app.add_option("--close", o.close,
+                 "Closing radius in particle spacings: dilates, then erodes the level set, filling gaps narrower than twice it (default 0.5)")
+      ->check(CLI::Range(0.0, 4.0));
+  app.add_option("--smooth", o.smooth, "OpenVDB level-set mean-curvature smoothing iterations after the closing (default 10)")
+      ->check(CLI::Range(0, 100));
   app.add_flag("--vel", o.velocity, "Add a `vel` vec3 grid (particle velocities, for motion blur) to the VDB");
   app.add_flag("--density", o.density, "Add a `density` fog grid (Blender's volume shader shows it without setup)");
   app.add_option("--format", o.formats, "Comma-separated outputs among obj, ply, vdb (default obj,vdb)");
@@ -190,6 +195,7 @@ int main(int argc, char** argv) {
     settings.anisotropy.n_eps = o.n_eps >= 0 ? o.n_eps : defaults.n_eps;
     settings.iso = o.iso > 0 ? o.iso : defaults.iso;
     settings.half_band = defaults.half_band;
+    settings.close_radius = o.close >= 0 ? o.close : defaults.close;
     settings.smooth_iterations = o.smooth >= 0 ? o.smooth : defaults.smooth;
     settings.velocity_grid = (o.velocity || defaults.velocity) && has("vdb");
     settings.density_grid = (o.density || defaults.density) && has("vdb");

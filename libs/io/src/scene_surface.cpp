@@ -21,6 +21,7 @@ void ParseSurfaceSettings(TomlReader& t, SurfaceSettings& s) {
   s.n_eps = int(t.Integer("n_eps", s.n_eps, Range::Closed(0, 1000)));
   s.iso = t.Number("iso", s.iso, Range::Positive());
   s.half_band = t.Number("half_band", s.half_band, Range::Closed(3, 64));
+  s.close = t.Number("close", s.close, Range::Closed(0, 4));
   s.smooth = int(t.Integer("smooth", s.smooth, Range::Closed(0, 100)));
   s.velocity = t.Bool("velocity", s.velocity);
   s.density = t.Bool("density", s.density);

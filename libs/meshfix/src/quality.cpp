@@ -7,6 +7,7 @@
 #include <cmath>
 #include <numeric>
 
+#include "rime/core/union_find.h"
 #include "rime/exec/parallel.h"
 
 namespace rime::meshfix {
@@ -25,19 +26,6 @@ struct VertexFaces {
     std::vector<std::uint32_t> fill(offsets.begin(), offsets.end() - 1);
     for (std::uint32_t f = 0; f < mesh.triangles.size(); ++f)
       for (std::uint32_t v : mesh.triangles[f]) faces[fill[v]++] = f;
-  }
-};
-
-struct UnionFind {
-  std::vector<std::uint32_t> parent;
-  explicit UnionFind(std::size_t n) : parent(n) { std::iota(parent.begin(), parent.end(), 0u); }
-  std::uint32_t Find(std::uint32_t a) {
-    while (parent[a] != a) a = parent[a] = parent[parent[a]];
-    return a;
-  }
-  void Unite(std::uint32_t a, std::uint32_t b) {
-    a = Find(a), b = Find(b);
-    if (a != b) parent[std::max(a, b)] = std::min(a, b);
   }
 };
 

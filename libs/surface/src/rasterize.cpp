@@ -9,6 +9,7 @@
 // than the band become inactive −background tiles: a proper narrow band on both sides.
 #include <openvdb/openvdb.h>
 #include <openvdb/tools/LevelSetFilter.h>
+#include <openvdb/tools/LevelSetRebuild.h>
 #include <openvdb/tools/LevelSetUtil.h>
 #include <openvdb/tools/Morphology.h>
 #include <openvdb/tools/Prune.h>
@@ -507,6 +508,7 @@ void CheckSettings(const ParticleSet& particles, const Settings& s) {
   if (!(s.iso > 0)) fail("iso value must be positive", "iso");
   if (!(s.half_band >= 3)) fail("narrow band half width must be at least 3 voxels", "half_band");
   if (s.smooth_iterations < 0) fail("smoothing iterations must be >= 0", "smooth");
+  if (!(s.close_radius >= 0 && s.close_radius <= 4)) fail("closing radius must be in [0, 4] particle spacings", "close");
   const auto& a = s.anisotropy;
   if (!(a.k_r >= 1)) fail("k_r must be >= 1", "k_r");
   if (!(a.k_s >= 0)) fail("k_s must be >= 0 (0 = automatic)", "k_s");
@@ -650,9 +652,24 @@ Result Reconstruct(const ParticleSet& particles, const Settings& settings) {
   stats.seconds_rasterize = Seconds(t0);
 
   t0 = Clock::now();
-  if (settings.smooth_iterations > 0) {
+  // Mean-curvature flow removes the bump every particle makes in a union of particle shapes; the
+  // kernel sum is smooth already, and the flow would thin its splashes and sheets away.
+  const int smooth_iterations = settings.field == Field::kKernelSum ? 0 : settings.smooth_iterations;
+  if (settings.close_radius > 0 || smooth_iterations > 0) {
+    // Closing joins particles whose shapes leave gaps (pores, bead chains) without thinning real
+    // sheets. The kernel sum's (iso − f)/‖∇f‖ is a distance only near the surface, and the
+    // filters' PDEs need a true signed distance, so it is rebuilt first.
+    if (settings.field == Field::kKernelSum) {
+      grid = openvdb::tools::levelSetRebuild(*grid, 0.0f, float(settings.half_band));
+      grid->setName("surface");
+    }
     openvdb::tools::LevelSetFilter<openvdb::FloatGrid> filter(*grid);
-    for (int k = 0; k < settings.smooth_iterations; ++k) filter.meanCurvature();
+    if (settings.close_radius > 0) {
+      const float radius = float(settings.close_radius * particles.spacing);
+      filter.offset(-radius);
+      filter.offset(radius);
+    }
+    for (int k = 0; k < smooth_iterations; ++k) filter.meanCurvature();
   }
   if (settings.velocity_grid) {
     auto vel = openvdb::Vec3SGrid::create(openvdb::Vec3s(0, 0, 0));

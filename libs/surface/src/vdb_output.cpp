@@ -18,30 +18,18 @@
 #include "grids.h"
 #include "rime/core/atomic_file.h"
 #include "rime/core/error.h"
+#include "rime/core/union_find.h"
 #include "rime/exec/parallel.h"
 
 namespace rime::surface {
 namespace {
 
-struct DisjointSets {
-  std::vector<std::uint32_t> parent;
-  explicit DisjointSets(std::size_t n) : parent(n) { std::iota(parent.begin(), parent.end(), 0u); }
-  std::uint32_t Find(std::uint32_t a) {
-    while (parent[a] != a) a = parent[a] = parent[parent[a]];
-    return a;
-  }
-  void Join(std::uint32_t a, std::uint32_t b) {
-    a = Find(a), b = Find(b);
-    if (a != b) parent[std::max(a, b)] = std::min(a, b);
-  }
-};
-
 // Removes closed shells with negative signed volume: the inward-facing surfaces of voids enclosed
 // in the body (e.g. the gaps a union of r_iso = 0.75 d_p spheres leaves at cubic cell centres).
 std::uint64_t DropVoidShells(io::TriMesh& mesh) {
   const std::size_t nv = mesh.positions.size();
-  DisjointSets sets(nv);
-  for (const auto& t : mesh.triangles) sets.Join(t[0], t[1]), sets.Join(t[1], t[2]);
+  UnionFind sets(nv);
+  for (const auto& t : mesh.triangles) sets.Unite(t[0], t[1]), sets.Unite(t[1], t[2]);
   std::vector<double> volume(nv, 0.0);
   for (const auto& t : mesh.triangles) {
     const Vec3d a(mesh.positions[t[0]]), b(mesh.positions[t[1]]), c(mesh.positions[t[2]]);

@@ -81,8 +81,10 @@ struct FreezingSettings {
   double dt_ref = 0.006;              // s
   double film_diffusion = 0.15;       // D_Gamma in d_p^2 / dt_ref
   double drying_rate = 0;             // k_dry, 1/s
-  int growth_sign = 1;                // +1: grow against incoming flow (paper), -1: flipped
-  std::string fr_mode = "map";        // "map" | "clamp"
+  // Ice grows downstream, with the flow (−1), and not where fr < 0 ("clamp"): the paper's pictures
+  // and text (docs/physics.md "Freezing fraction"); +1 grows against the flow, a column into falling water.
+  int growth_sign = -1;               // −1: with the flow, +1: against it (Eq. 31 as printed)
+  std::string fr_mode = "clamp";      // "clamp": max(0, dot) | "map": (dot + 1) / 2
   std::string ce_mode = "dimensionless";  // | "raw"
   std::string ce_aggregation = "max";     // | "sum"
   std::string pca = "w2h";            // "w2h" (W weights, 2h) | "yu_turk" (4h)

@@ -11,7 +11,7 @@ class TomlReader;
 
 /// Defaults follow spec §10/§12. rime-surface flags override these values.
 struct SurfaceSettings {
-  std::string phase = "ice";              // "ice" | "water" | "both"
+  std::string phase = "both";             // "ice" | "water" | "both"
   std::string ice_field = "ellipsoids";   // "ellipsoids" | "kernel_sum" | "isotropic"
   std::string water_field = "kernel_sum"; // same choices
   double voxel_ratio = 0.5;               // voxel size / particle spacing (ignored when voxel_size or resolution is set)
@@ -23,7 +23,8 @@ struct SurfaceSettings {
   int n_eps = 6;
   double iso = 0.5;                       // kernel_sum iso value
   double half_band = 3;                   // voxels, >= 3
-  int smooth = 0;                         // level-set smoothing iterations
+  double close = 0.5;                     // closing radius, particle spacings: fills sampling gaps narrower than twice this
+  int smooth = 10;                        // mean-curvature smoothing iterations of the level set (removes particle bumps)
   bool velocity = false;                  // `vel` grid in the VDB
   bool density = false;                   // `density` fog grid in the VDB
   std::vector<std::string> formats{"obj", "vdb"};  // any of obj, ply, vdb

@@ -47,7 +47,8 @@ struct Settings {
   bool recompute_anisotropy = false;      // ice: PCA over ice neighbours instead of the stored D
   double iso = 0.5;             // kernel_sum: surface where Σ V W_A = iso
   double half_band = 3;         // narrow band half width, voxels (>= 3)
-  int smooth_iterations = 0;    // OpenVDB LevelSetFilter mean-curvature iterations
+  double close_radius = 0;      // d_p: morphological closing (dilate, then erode) that fills gaps narrower than twice this
+  int smooth_iterations = 0;    // OpenVDB LevelSetFilter mean-curvature iterations after the closing (not for kKernelSum)
   bool velocity_grid = false;   // also build a `vel` vec3 grid
   bool density_grid = false;    // also build a `density` fog grid
   bool mesh = true;             // extract the triangle mesh
