@@ -1,0 +1,349 @@
+// rime-bake --farm on a real single-node Slurm cluster on localhost (local_slurm.h): a farm bake
+// writes the same bytes as a local bake and leaves a state both agree is up to date; a failed frame
+// is reported with its log and resubmitted alone; a cancelled bake leaves no job and nothing that
+// looks finished. The settings and --dry-run checks need no cluster.
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cstring>
+#include <filesystem>
+#include <fmt/format.h>
+#include <fstream>
+#include <map>
+#include <nlohmann/json.hpp>
+#include <set>
+#include <sstream>
+#include <thread>
+
+#include "fake_tools.h"
+#include "local_slurm.h"
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+namespace rime {
+namespace {
+
+// About 1 700 water particles falling onto a sphere; 0.25 s at 20 fps = frames 0..5.
+const char* kRealScene = R"([scene]
+name = "farm"
+fps = 20
+end_time = 0.25
+
+[water]
+spacing = 0.025
+
+[simulation]
+modules = ["gravity", "viscosity", "surface_tension", "freezing"]
+
+[domain]
+min = [-0.5, -0.5, -0.05]
+max = [0.5, 0.5, 0.8]
+
+[[solid]]
+name = "ground"
+shape = "plane"
+size = [1.0, 1.0, 1.0]
+
+[[solid]]
+name = "ball"
+shape = "sphere"
+radius = 0.12
+translate = [0.0, 0.0, 0.2]
+
+[[water_block]]
+min = [-0.15, -0.15, 0.4]
+max = [0.15, 0.15, 0.55]
+
+[surface]
+phase = "water"
+)";
+
+// For the fake stage tools (pipeline/tests/fake_tools.h): frames 0..3.
+constexpr int kFakeLastFrame = 3;
+const char* kFakeScene = R"([scene]
+fps = 2
+end_time = 1.5
+
+[water]
+spacing = 0.05
+
+[simulation]
+modules = ["gravity"]
+
+[[solid]]
+name = "ground"
+shape = "plane"
+size = [1.0, 1.0, 1.0]
+
+[[water_block]]
+min = [0.0, 0.0, 0.1]
+max = [0.2, 0.2, 0.3]
+)";
+
+constexpr auto kFarmTimeout = std::chrono::seconds(150);
+
+std::string ReadFile(const fs::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  std::stringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+// Every file a bake leaves outside its own bookkeeping (state, logs), by path relative to `root`.
+std::map<std::string, std::string> Outputs(const fs::path& root) {
+  std::map<std::string, std::string> files;
+  for (const auto& entry : fs::recursive_directory_iterator(root)) {
+    if (!entry.is_regular_file()) continue;
+    const std::string name = entry.path().lexically_relative(root).generic_string();
+    if (name.rfind("cache/.rime-bake/", 0) == 0 || name.rfind("cache/logs/", 0) == 0) continue;
+    files[name] = ReadFile(entry.path());
+  }
+  return files;
+}
+
+class Farm : public ::testing::Test {
+ protected:
+  static inline testing::LocalSlurm* cluster_ = nullptr;
+  static inline std::string cluster_problem_;
+
+  static void TearDownTestSuite() {
+    delete cluster_;
+    cluster_ = nullptr;
+  }
+
+  void SetUp() override {
+    root_ = fs::temp_directory_path() / fmt::format("rime_farm_{}_{}", ::testing::UnitTest::GetInstance()->current_test_info()->name(), getpid());
+    fs::remove_all(root_);
+    fs::create_directories(root_);
+    bake::testing::WriteFakeTools(root_ / "tools");
+    std::ofstream(root_ / "real.toml") << kRealScene;
+    std::ofstream(root_ / "fake.toml") << kFakeScene;
+    // Two frames per array task; the simulation takes one CPU so a surface task can run beside it.
+    std::ofstream(root_ / "site.toml") << "[farm]\nchunk = 2\ncpus_per_task = 1\n\n[farm.time]\ndefault = \"10\"\n";
+    // One frame per task: a failing frame then stops no other frame.
+    std::ofstream(root_ / "site1.toml") << "[farm]\nchunk = 1\n";
+    setenv("FAKE_LOG", (root_ / "invocations.log").c_str(), 1);
+    setenv("FAKE_FRAMES", std::to_string(kFakeLastFrame).c_str(), 1);
+    unsetenv("FAKE_FAIL");
+    unsetenv("FAKE_SIM_SLEEP");
+    unsetenv("RIME_FARM_CONFIG");
+  }
+  void TearDown() override {
+    if (!HasFailure()) fs::remove_all(root_);
+  }
+
+  /// Starts the cluster once for the whole suite; the caller skips when Slurm is not installed.
+  static bool ClusterUp() {
+    if (cluster_) return true;
+    if (const auto missing = testing::LocalSlurm::MissingBinary()) {
+      cluster_problem_ = fmt::format("Slurm is not installed ({} not found; Debian: apt install slurm-wlm)", *missing);
+      return false;
+    }
+    cluster_ = new testing::LocalSlurm;
+    const std::string problem = cluster_->Start(fs::temp_directory_path() / fmt::format("rime_farm_slurm_{}", getpid()));
+    if (!problem.empty()) {
+      delete cluster_;
+      cluster_ = nullptr;
+      ADD_FAILURE() << "cannot start the localhost Slurm cluster: " << problem;
+      return false;
+    }
+    return true;
+  }
+
+  /// Runs rime-bake with `args` (a scene under root_ named by `scene`); returns its exit code,
+  /// stdout+stderr in output_ and the JSON summary in summary_.
+  int RunBake(const std::string& scene, const fs::path& out, const std::string& args, bool fake_tools) {
+    std::string command = fmt::format("'{}' '{}' -o '{}' --json-summary '{}' {}", RIME_BINARY_DIR "/bin/rime-bake", (root_ / scene).string(),
+                                      out.string(), (root_ / "summary.json").string(), args);
+    if (fake_tools) command += fmt::format(" --tools '{}'", (root_ / "tools").string());
+    fs::remove(root_ / "summary.json");
+    const int status = std::system((command + " > '" + (root_ / "bake.txt").string() + "' 2>&1").c_str());
+    output_ = ReadFile(root_ / "bake.txt");
+    summary_ = json::parse(ReadFile(root_ / "summary.json"), nullptr, false);
+    return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  }
+
+  /// Polls `--farm status` until no job of the bake is queued or running; returns the last status.
+  json WaitForFarm(const std::string& scene, const fs::path& out, bool fake_tools) {
+    const auto deadline = std::chrono::steady_clock::now() + kFarmTimeout;
+    while (std::chrono::steady_clock::now() < deadline) {
+      RunBake(scene, out, "--farm status", fake_tools);
+      if (summary_.is_discarded()) return summary_;
+      bool busy = false;
+      for (const auto& [stage, counts] : summary_["stages"].items()) busy = busy || counts["queued"] > 0 || counts["running"] > 0;
+      if (!busy) return summary_;
+      std::this_thread::sleep_for(std::chrono::seconds(1));
+    }
+    ADD_FAILURE() << "the farm bake did not finish within " << kFarmTimeout.count() << " s:\n"
+                  << output_ << testing::LocalSlurm::Capture("squeue 2>&1");
+    return summary_;
+  }
+
+  static int Count(const json& status, const std::string& state) {
+    int n = 0;
+    for (const auto& [stage, counts] : status["stages"].items()) n += counts[state].get<int>();
+    return n;
+  }
+  int TotalRan() const {
+    int ran = 0;
+    for (const auto& [stage, s] : summary_["stages"].items()) ran += s["ran"].get<int>();
+    return ran;
+  }
+  std::vector<std::string> Invocations() const {
+    std::vector<std::string> lines;
+    std::ifstream in(root_ / "invocations.log");
+    for (std::string line; std::getline(in, line);) lines.push_back(line);
+    return lines;
+  }
+  const json* StatusOf(const json& status, const std::string& id) const {
+    for (const auto& job : status["jobs"])
+      if (job["id"] == id) return &job;
+    return nullptr;
+  }
+
+  fs::path root_;
+  std::string output_;
+  json summary_;
+};
+
+// Settings errors name file, line and key; the dry run shows the sbatch commands (arrays chained
+// per frame, the surface array streaming the simulation's frames) without any cluster.
+TEST_F(Farm, DryRunShowsTheJobChainAndSettingsAreValidated) {
+  ASSERT_EQ(RunBake("fake.toml", root_ / "out", "cleanup --farm slurm --dry-run --explain --farm-config " + (root_ / "site.toml").string(), true), 0)
+      << output_;
+  EXPECT_NE(output_.find("# surface.0003: "), std::string::npos) << output_;
+  EXPECT_NE(output_.find("--array=0-1"), std::string::npos) << output_;  // 4 frames, 2 per task
+  EXPECT_NE(output_.find("'--dependency=afterok:<boundary job>'"), std::string::npos) << output_;
+  EXPECT_NE(output_.find("'--dependency=after:<sim job>'"), std::string::npos) << output_;
+  EXPECT_NE(output_.find("'--dependency=aftercorr:<surface job>'"), std::string::npos) << output_;
+  EXPECT_NE(output_.find("--time=10"), std::string::npos) << output_;
+  EXPECT_NE(output_.find("--farm-task surface"), std::string::npos) << output_;
+  EXPECT_FALSE(fs::exists(root_ / "out/cache/.rime-bake/farm-jobs.json"));
+
+  std::ofstream(root_ / "fake.toml", std::ios::app) << "\n[farm]\nchunk = 0\n";
+  EXPECT_EQ(RunBake("fake.toml", root_ / "out", "--farm slurm --dry-run", true), 3) << output_;
+  EXPECT_NE(output_.find("fake.toml:" + std::to_string(std::count(kFakeScene, kFakeScene + std::strlen(kFakeScene), '\n') + 3) + ": farm.chunk"),
+            std::string::npos)
+      << output_;
+  std::ofstream(root_ / "bad_site.toml") << "[farm]\n[farm.time]\nsim = \"two hours\"\n";
+  EXPECT_EQ(RunBake("real.toml", root_ / "out", "--farm slurm --dry-run --farm-config " + (root_ / "bad_site.toml").string(), true), 3) << output_;
+  EXPECT_NE(output_.find("bad_site.toml:3: farm.time.sim"), std::string::npos) << output_;
+
+  // Without Slurm's commands on PATH a submission stops with one clear line.
+  const std::string path = std::getenv("PATH");
+  setenv("PATH", "/nonexistent", 1);
+  const int code = RunBake("real.toml", root_ / "out", "--farm slurm", true);
+  setenv("PATH", path.c_str(), 1);
+  EXPECT_EQ(code, 9) << output_;
+  EXPECT_NE(output_.find("sbatch not found on PATH"), std::string::npos) << output_;
+}
+
+TEST_F(Farm, BakeMatchesALocalBakeByteForByte) {
+  if (!ClusterUp()) GTEST_SKIP() << cluster_problem_;
+  ASSERT_EQ(RunBake("real.toml", root_ / "local", "cleanup -j 2", false), 0) << output_;
+
+  const std::string farm = "cleanup --farm-config " + (root_ / "site.toml").string();
+  ASSERT_EQ(RunBake("real.toml", root_ / "farm", farm + " --farm slurm", false), 0) << output_;
+  ASSERT_EQ(summary_["submitted"].size(), 4u) << output_;  // boundary, sim, surface, cleanup
+  const json status = WaitForFarm("real.toml", root_ / "farm", false);
+  EXPECT_EQ(Count(status, "failed") + Count(status, "missing"), 0) << output_;
+  EXPECT_EQ(Count(status, "done"), 2 + 2 * 6) << output_;
+
+  const auto local = Outputs(root_ / "local"), farmed = Outputs(root_ / "farm");
+  EXPECT_GT(local.size(), 30u);
+  for (const auto& [name, bytes] : local) {
+    const auto it = farmed.find(name);
+    if (it == farmed.end()) ADD_FAILURE() << name << " is missing from the farm bake";
+    else EXPECT_TRUE(it->second == bytes) << name << " differs between the farm and the local bake";
+  }
+  for (const auto& [name, bytes] : farmed) EXPECT_TRUE(local.count(name)) << name << " was written by the farm bake only";
+
+  // A second submission finds everything up to date; so does a local bake of the farm's output.
+  ASSERT_EQ(RunBake("real.toml", root_ / "farm", farm + " --farm slurm", false), 0) << output_;
+  EXPECT_TRUE(summary_["submitted"].empty()) << output_;
+  EXPECT_EQ(summary_["stale_jobs"], 0) << output_;
+  ASSERT_EQ(RunBake("real.toml", root_ / "farm", "cleanup", false), 0) << output_;
+  EXPECT_EQ(TotalRan(), 0) << output_;
+}
+
+TEST_F(Farm, FailedFrameIsReportedWithItsLogAndResubmittedAlone) {
+  if (!ClusterUp()) GTEST_SKIP() << cluster_problem_;
+  const std::string farm = "cleanup --farm-config " + (root_ / "site1.toml").string();
+  setenv("FAKE_FAIL", "surface:2", 1);  // exported to the tasks with the submitter's environment
+  ASSERT_EQ(RunBake("fake.toml", root_ / "out", farm + " --farm slurm", true), 0) << output_;
+  unsetenv("FAKE_FAIL");
+  const json status = WaitForFarm("fake.toml", root_ / "out", true);
+  const std::string status_text = output_;
+  EXPECT_EQ(Count(status, "failed"), 1) << status_text;
+  const json* surface = StatusOf(status, "surface.0002");
+  ASSERT_NE(surface, nullptr) << status_text;
+  EXPECT_EQ((*surface)["state"], "failed");
+  const fs::path log = root_ / "out/cache/logs/surface.0002.log";
+  EXPECT_EQ((*surface)["log"], log.string());
+  EXPECT_NE(ReadFile(log).find("no particles in frame (fake)"), std::string::npos);
+  EXPECT_NE(status_text.find("surface.0002 failed"), std::string::npos) << status_text;
+  EXPECT_NE(status_text.find(log.string()), std::string::npos) << status_text;
+  const json* cleanup = StatusOf(status, "cleanup.0002");
+  ASSERT_NE(cleanup, nullptr) << status_text;
+  EXPECT_EQ((*cleanup)["state"], "missing");  // its dependency failed, so Slurm never ran it
+  EXPECT_EQ(Count(status, "done"), 2 + 2 * (kFakeLastFrame + 1) - 2) << status_text;
+
+  fs::remove(root_ / "invocations.log");
+  ASSERT_EQ(RunBake("fake.toml", root_ / "out", farm + " --farm resubmit", true), 0) << output_;
+  const json after = WaitForFarm("fake.toml", root_ / "out", true);
+  EXPECT_EQ(Count(after, "done"), 2 + 2 * (kFakeLastFrame + 1)) << output_;
+  const auto runs = Invocations();
+  ASSERT_EQ(runs.size(), 2u) << fmt::format("{}", fmt::join(runs, "\n"));
+  EXPECT_EQ(runs[0].rfind("rime-surface ", 0), 0u);
+  EXPECT_NE(runs[0].find("particles.0002.h5part"), std::string::npos);
+  EXPECT_EQ(runs[1].rfind("rime-clean ", 0), 0u);
+  EXPECT_NE(runs[1].find("ice.0002.obj"), std::string::npos);
+
+  fs::remove(root_ / "invocations.log");
+  ASSERT_EQ(RunBake("fake.toml", root_ / "out", "cleanup", true), 0) << output_;
+  EXPECT_EQ(TotalRan(), 0) << output_;
+  EXPECT_TRUE(Invocations().empty());
+}
+
+TEST_F(Farm, CancelLeavesNoJobAndNothingThatLooksFinished) {
+  if (!ClusterUp()) GTEST_SKIP() << cluster_problem_;
+  const std::string farm = "cleanup --farm-config " + (root_ / "site.toml").string();
+  setenv("FAKE_SIM_SLEEP", "2", 1);  // the simulation takes about 8 s
+  ASSERT_EQ(RunBake("fake.toml", root_ / "out", farm + " --farm slurm", true), 0) << output_;
+  unsetenv("FAKE_SIM_SLEEP");
+  std::set<std::string> ours;
+  for (const auto& s : summary_["submitted"]) ours.insert(s["job_id"].get<std::string>());
+  ASSERT_EQ(ours.size(), 4u) << output_;
+
+  // Cancel while the simulation runs and frame 1 exists (the surface task of frames 0-1 may be done).
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+  while (!fs::exists(root_ / "out/cache/sim/particles.0001.h5part") && std::chrono::steady_clock::now() < deadline)
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  ASSERT_TRUE(fs::exists(root_ / "out/cache/sim/particles.0001.h5part")) << testing::LocalSlurm::Capture("squeue 2>&1");
+  EXPECT_EQ(RunBake("fake.toml", root_ / "out", "cleanup", true), 5) << output_;  // a local bake refuses meanwhile
+  EXPECT_NE(output_.find("--farm cancel"), std::string::npos) << output_;
+  ASSERT_EQ(RunBake("fake.toml", root_ / "out", farm + " --farm cancel", true), 0) << output_;
+  EXPECT_FALSE(summary_["cancelled"].empty()) << output_;
+  const std::string queue = testing::LocalSlurm::Capture("squeue --noheader --format=%i 2>&1");
+  for (const auto& id : ours) EXPECT_EQ(queue.find(id), std::string::npos) << "job " << id << " is still in the queue:\n" << queue;
+
+  // Nothing the cancelled tasks left may pass as finished: the status shows nothing done after the
+  // simulation, and a local bake completes the bake to the same bytes as an uninterrupted one.
+  const json status = WaitForFarm("fake.toml", root_ / "out", true);
+  EXPECT_EQ(Count(status, "queued") + Count(status, "running"), 0) << output_;
+  const json* sim = StatusOf(status, "sim");
+  ASSERT_NE(sim, nullptr) << output_;
+  EXPECT_EQ((*sim)["state"], "failed") << output_;  // interrupted: its incomplete marker remains
+  EXPECT_LT(status["stages"]["surface"]["done"], kFakeLastFrame + 1) << output_;
+  ASSERT_EQ(RunBake("fake.toml", root_ / "out", "cleanup", true), 0) << output_;
+  EXPECT_EQ(summary_["stages"]["sim"]["ran"], 1) << output_;
+  ASSERT_EQ(RunBake("fake.toml", root_ / "reference", "cleanup", true), 0) << output_;
+  EXPECT_TRUE(Outputs(root_ / "out") == Outputs(root_ / "reference"));
+}
+
+}  // namespace
+}  // namespace rime
