@@ -1,5 +1,5 @@
 // rime-bake --farm on a real single-node Slurm cluster on localhost (local_slurm.h): a farm bake
-// writes the same bytes as a local bake and leaves a state both agree is up to date; a failed frame
+// writes the same bytes as a local bake (reports: the same apart from timings) and leaves a state both agree is up to date; a failed frame
 // is reported with its log and resubmitted alone; a cancelled bake leaves no job and nothing that
 // looks finished. The settings and --dry-run checks need no cluster.
 #include <gtest/gtest.h>
@@ -93,14 +93,44 @@ std::string ReadFile(const fs::path& p) {
   return s.str();
 }
 
+void DropTimings(json& value) {
+  if (value.is_object()) {
+    for (auto it = value.begin(); it != value.end();) {
+      if (it.key().find("seconds") != std::string::npos) it = value.erase(it);
+      else DropTimings(*it++);
+    }
+  } else if (value.is_array()) {
+    for (auto& item : value) DropTimings(item);
+  }
+}
+
 // Every file a bake leaves outside its own bookkeeping (state, logs), by path relative to `root`.
+// Reports (.json, .jsonl) record how long each step took and where the output folder is: those
+// fields are left out (timings dropped, the folder written as $OUT); every other byte counts.
 std::map<std::string, std::string> Outputs(const fs::path& root) {
   std::map<std::string, std::string> files;
   for (const auto& entry : fs::recursive_directory_iterator(root)) {
     if (!entry.is_regular_file()) continue;
     const std::string name = entry.path().lexically_relative(root).generic_string();
     if (name.rfind("cache/.rime-bake/", 0) == 0 || name.rfind("cache/logs/", 0) == 0) continue;
-    files[name] = ReadFile(entry.path());
+    std::string bytes = ReadFile(entry.path());
+    const std::string ext = entry.path().extension().string();
+    if (ext == ".json" || ext == ".jsonl") {
+      std::vector<std::string> records = {bytes};
+      if (ext == ".jsonl") {
+        records.clear();
+        std::istringstream lines(bytes);
+        for (std::string line; std::getline(lines, line);) records.push_back(line);
+      }
+      bytes.clear();
+      for (const auto& record : records) {
+        json value = json::parse(record, nullptr, false);
+        DropTimings(value);
+        bytes += value.dump() + "\n";
+      }
+      for (std::size_t at; (at = bytes.find(root.string())) != std::string::npos;) bytes.replace(at, root.string().size(), "$OUT");
+    }
+    files[name] = bytes;
   }
   return files;
 }
