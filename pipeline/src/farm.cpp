@@ -580,6 +580,9 @@ int FarmCancel(const FarmContext& farm, json& summary) {
 
 int FarmTask(const FarmContext& farm, const std::string& group, int chunk, const std::string& sim_job) {
   const BakeLayout& layout = farm.layout;
+  // Wall-clock stamps in the task's Slurm log: how long a task waited and ran, beside its jobs' logs.
+  const auto now = [] { return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count(); };
+  log::Info("farm task {} started at {:.3f} s since the epoch", group, now());
   if (!fs::exists(TaskScript(layout))) {
     char host[256] = "this node";
     gethostname(host, sizeof host - 1);
@@ -639,6 +642,7 @@ int FarmTask(const FarmContext& farm, const std::string& group, int chunk, const
     const StageSummary& s = result.stages[static_cast<int>(job->stage)];
     log::Info("{}: {}", job->id, s.ran ? fmt::format("done in {}", FormatDuration(s.seconds)) : std::string("up to date"));
   }
+  log::Info("farm task {} finished at {:.3f} s since the epoch", group, now());
   return 0;
 }
 
