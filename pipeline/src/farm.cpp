@@ -108,19 +108,32 @@ void AddQueueEntry(const std::string& id, const std::string& state, std::map<std
   }
 }
 
-// This user's unfinished jobs and array tasks: Slurm id ("123", "123_4") -> state.
-std::map<std::string, std::string> QueueStates() {
-  const Captured r = CaptureProcess(SlurmCommand("squeue"), {"--noheader", "--array", "--me", "--format=%i|%T"});
+// This user's jobs and array tasks the controller knows: Slurm id ("123", "123_4") -> state. With
+// `finished`, those that ended recently (kept MinJobAge seconds), else those queued or running.
+std::map<std::string, std::string> SqueueStates(bool finished) {
+  const Captured r = CaptureProcess(SlurmCommand("squeue"), {"--noheader", "--array", "--me", "--states=all", "--format=%i|%T"});
   if (r.code != 0) throw Refused(fmt::format("squeue failed: {}", OneLine(r.err)));
-  std::map<std::string, std::string> queue;
+  std::map<std::string, std::string> states;
   std::istringstream lines(r.out);
   for (std::string line; std::getline(lines, line);) {
     const auto bar = line.find('|');
     if (bar == std::string::npos) continue;
     const std::string state = line.substr(bar + 1);
-    if (!FinishedState(state)) AddQueueEntry(line.substr(0, bar), state, queue);
+    if (FinishedState(state) == finished) AddQueueEntry(line.substr(0, bar), state, states);
   }
-  return queue;
+  return states;
+}
+std::map<std::string, std::string> QueueStates() { return SqueueStates(false); }
+
+// The queue, or nothing (with a warning) where Slurm's commands or controller cannot be reached:
+// for views that still say something useful from the cache alone.
+std::map<std::string, std::string> QueueStatesOrWarn() {
+  try {
+    return QueueStates();
+  } catch (const Error& e) {
+    log::Warn("cannot read the Slurm queue ({}); showing what the cache knows", e.what());
+    return {};
+  }
 }
 
 // Whether one job is still queued or running; nullopt when the controller cannot be asked.
@@ -136,28 +149,29 @@ std::optional<bool> JobAlive(const std::string& job_id) {
   return false;
 }
 
-// Final states of finished jobs from the accounting database, or from the job completion log
-// (`sacct -c`) on clusters without one. Best effort: empty when neither is configured.
+// Final states of finished jobs: from the controller while it keeps them, then from the accounting
+// database where the site has one. Best effort: empty where neither knows them any more.
 std::map<std::string, std::string> FinishedStates(const std::vector<std::string>& job_ids) {
   std::map<std::string, std::string> states;
+  try {
+    states = SqueueStates(true);
+  } catch (const Error&) {
+  }
   const auto sacct = FindOnPath("sacct");
   if (!sacct || job_ids.empty()) return states;
   std::string ids;
   for (const auto& id : job_ids) ids += (ids.empty() ? "" : ",") + id;
-  for (const bool completion_log : {false, true}) {
-    std::vector<std::string> args = {"--noheader", "--parsable2", "--allocations", "--jobs=" + ids, "--format=JobID,State"};
-    if (completion_log) args.insert(args.begin(), "--completion");
-    const Captured r = CaptureProcess(*sacct, args);
-    if (r.code != 0) continue;
-    std::istringstream lines(r.out);
-    for (std::string line; std::getline(lines, line);) {
-      const auto bar = line.find('|');
-      if (bar == std::string::npos) continue;
-      std::string state = line.substr(bar + 1);
-      state = state.substr(0, state.find(' '));  // "CANCELLED by 0"
-      if (!state.empty()) AddQueueEntry(line.substr(0, bar), state, states);
-    }
-    if (!states.empty()) break;
+  const Captured r = CaptureProcess(*sacct, {"--noheader", "--parsable2", "--allocations", "--jobs=" + ids, "--format=JobID,State"});
+  if (r.code != 0) return states;  // e.g. no accounting storage configured
+  std::istringstream lines(r.out);
+  for (std::string line; std::getline(lines, line);) {
+    const auto bar = line.find('|');
+    if (bar == std::string::npos) continue;
+    std::string state = line.substr(bar + 1);
+    state = state.substr(0, state.find(' '));  // "CANCELLED by 0"
+    std::map<std::string, std::string> entry;
+    if (!state.empty()) AddQueueEntry(line.substr(0, bar), state, entry);
+    for (const auto& [id, value] : entry) states.emplace(id, value);  // the controller's view first
   }
   return states;
 }
@@ -290,7 +304,10 @@ int FarmSubmit(const FarmContext& farm, bool resubmit, json& summary) {
   const fs::path sbatch = farm.dry_run ? fs::path("sbatch") : SlurmCommand("sbatch");
   const JobsRecord previous = ReadJobs(layout);
   std::map<std::string, std::string> queue;
-  if (!previous.submissions.empty() && (!farm.dry_run || FindOnPath("squeue"))) queue = QueueStates();
+  if (!previous.submissions.empty()) {
+    if (farm.dry_run) queue = QueueStatesOrWarn();  // a dry run shows the plan even without a controller
+    else queue = QueueStates();
+  }
   const std::vector<std::string> alive = AliveJobIds(previous, queue);
   if (!resubmit && !alive.empty())
     throw Error(ExitCode::kIo, fmt::format("Slurm jobs of this bake are still queued or running ({}): see --farm status; --farm resubmit "
@@ -465,7 +482,7 @@ int FarmStatus(const FarmContext& farm, json& summary) {
   const JobsRecord record = ReadJobs(layout);
   std::map<std::string, std::string> queue, finished;
   if (!record.submissions.empty()) {
-    queue = QueueStates();
+    queue = QueueStatesOrWarn();
     finished = FinishedStates(record.JobIds());
   }
   const std::vector<Job> jobs = BuildGraph(*farm.doc, layout, farm.graph, farm.target);
@@ -527,8 +544,7 @@ int FarmStatus(const FarmContext& farm, json& summary) {
   for (const auto& [key, frames] : frames_by) {
     if (key.second == kFailed) continue;
     const bool whole = frames.size() == 1 && frames.front() < 0;
-    table += fmt::format("{} {}{}: {}\n", StageName(static_cast<Stage>(key.first)), whole ? "" : "frames ", whole ? "" : Ranges(frames),
-                         kStateNames[key.second]);
+    table += fmt::format("{}{}: {}\n", StageName(static_cast<Stage>(key.first)), whole ? "" : " frames " + Ranges(frames), kStateNames[key.second]);
   }
   std::printf("%s%s", table.c_str(), details.c_str());
   int missing = 0;

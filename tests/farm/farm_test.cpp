@@ -254,6 +254,21 @@ TEST_F(Farm, DryRunShowsTheJobChainAndSettingsAreValidated) {
   EXPECT_NE(output_.find("--farm-task surface"), std::string::npos) << output_;
   EXPECT_FALSE(fs::exists(root_ / "out/cache/.rime-bake/farm-jobs.json"));
 
+  // The simulation asks for a GPU only where the site has them and the device allows it.
+  std::ofstream(root_ / "gpu_site.toml") << "[farm]\ngpus = true\nsim_partition = \"gpu\"\ncpus_per_task = 3\n";
+  const auto sim_line = [&] {
+    const auto at = output_.find("--job-name=rime:fake:sim");
+    return at == std::string::npos ? std::string() : output_.substr(at, output_.find('\n', at) - at);
+  };
+  const std::string gpu_site = "--farm slurm --dry-run --farm-config " + (root_ / "gpu_site.toml").string();
+  ASSERT_EQ(RunBake("fake.toml", root_ / "out", gpu_site + " --device cuda", true), 0) << output_;
+  EXPECT_NE(sim_line().find("--gres=gpu:1"), std::string::npos) << output_;
+  EXPECT_NE(sim_line().find("--partition=gpu"), std::string::npos) << output_;
+  EXPECT_EQ(output_.find("--gres=gpu:1"), output_.rfind("--gres=gpu:1")) << "only the simulation asks for a GPU:\n" << output_;
+  ASSERT_EQ(RunBake("fake.toml", root_ / "out", gpu_site + " --device cpu", true), 0) << output_;
+  EXPECT_EQ(sim_line().find("--gres"), std::string::npos) << output_;
+  EXPECT_NE(sim_line().find("--cpus-per-task=3"), std::string::npos) << output_;
+
   std::ofstream(root_ / "fake.toml", std::ios::app) << "\n[farm]\nchunk = 0\n";
   EXPECT_EQ(RunBake("fake.toml", root_ / "out", "--farm slurm --dry-run", true), 3) << output_;
   EXPECT_NE(output_.find("fake.toml:" + std::to_string(std::count(kFakeScene, kFakeScene + std::strlen(kFakeScene), '\n') + 3) + ": farm.chunk"),
@@ -314,6 +329,7 @@ TEST_F(Farm, FailedFrameIsReportedWithItsLogAndResubmittedAlone) {
   EXPECT_EQ((*surface)["state"], "failed");
   const fs::path log = root_ / "out/cache/logs/surface.0002.log";
   EXPECT_EQ((*surface)["log"], log.string());
+  EXPECT_EQ((*surface)["slurm_state"], "FAILED");
   EXPECT_NE(ReadFile(log).find("no particles in frame (fake)"), std::string::npos);
   EXPECT_NE(status_text.find("surface.0002 failed"), std::string::npos) << status_text;
   EXPECT_NE(status_text.find(log.string()), std::string::npos) << status_text;
