@@ -616,10 +616,10 @@ int FarmTask(const FarmContext& farm, const std::string& group, int chunk, const
   std::vector<const Job*> selected;
   for (const Job& job : jobs)
     if (job.frame >= 0 ? StageName(job.stage) == group && job.frame >= lo && job.frame <= hi : job.id == group) selected.push_back(&job);
-  if (selected.empty()) {
-    log::Info("farm task {}: no job in frames {}-{}", group, lo, hi);
-    return 0;
-  }
+  if (selected.empty())  // the submitting machine's graph had these jobs: this node's differs
+    throw InputError(fmt::format("farm task {}: this node's bake graph has no such job{} (the preview stage needs Blender on the nodes' PATH)",
+                                 group, lo == INT64_MIN ? std::string() : fmt::format(" in frames {}-{}", lo, hi)),
+                     layout.scene_file.string());
 
   const fs::path sim_marker = IncompleteMarker(layout, "sim");
   std::string sim_key;

@@ -85,6 +85,7 @@ int main(int argc, char** argv) {
     layout.output = output.empty() ? fs::path("out") / doc.scene().info.name : fs::path(output);
 
     if (clean) {
+      RefuseWhileFarmJobsAlive(layout);
       for (const fs::path& folder : {layout.cache(), layout.surface(), layout.clean(), layout.preview()}) {
         std::error_code ec;
         const auto removed = fs::remove_all(folder, ec);

@@ -227,6 +227,11 @@ int main(int argc, char** argv) {
     if (l.count) groups[group]["frame_latency_s"] = ToJson(l);
   }
   std::printf("(frame latency: cleanup = its start after the frame's surface task ended; surface = its end after the simulation wrote the frame)\n");
+  // Streaming: surface tasks that finished before the simulation did.
+  int streamed = 0;
+  const double sim_end = tasks["sim"].count(-1) ? tasks["sim"][-1].end : -1;
+  for (const auto& [k, t] : tasks["surface"]) streamed += t.end > 0 && t.end < sim_end;
+  std::printf("%d of %zu surface tasks finished before the simulation ended\n", streamed, tasks["surface"].size());
   const json out = {{"frames", frames},
                     {"chunk", chunk},
                     {"cpus", std::thread::hardware_concurrency()},
@@ -235,6 +240,7 @@ int main(int argc, char** argv) {
                     {"farm_wall_s", farm_wall},
                     {"farm_submit_s", submit_seconds},
                     {"farm_failed_or_missing", failed},
+                    {"surface_tasks_done_before_sim_end", streamed},
                     {"farm_groups", groups}};
   std::ofstream(json_path) << out.dump(2) << "\n";
   std::printf("wrote %s\n", json_path.c_str());
