@@ -287,6 +287,36 @@ TEST_F(Farm, DryRunShowsTheJobChainAndSettingsAreValidated) {
   EXPECT_NE(output_.find("sbatch not found on PATH"), std::string::npos) << output_;
 }
 
+// What a node runs, without Slurm: a task of the surface array (index 1 of 2-frame chunks) runs
+// frames 2-3 only and records them in per-job files that a later local bake takes as up to date.
+TEST_F(Farm, TaskRunsItsChunkAndLocalBakeAdoptsItsRecords) {
+  ASSERT_EQ(RunBake("fake.toml", root_ / "out", "sim", true), 0) << output_;
+  const std::string task = "surface --frames 0-3 --farm-task surface --farm-chunk 2";
+  setenv("SLURM_ARRAY_TASK_ID", "1", 1);
+  EXPECT_EQ(RunBake("fake.toml", root_ / "out", task, true), 5) << output_;  // no submission: the cache counts as not shared
+  EXPECT_NE(output_.find("filesystem every node sees"), std::string::npos) << output_;
+  std::ofstream(root_ / "out/cache/.rime-bake/farm-task.sh") << "#!/bin/sh\n";  // what a submission writes first
+  fs::remove(root_ / "invocations.log");
+  const int code = RunBake("fake.toml", root_ / "out", task, true);
+  unsetenv("SLURM_ARRAY_TASK_ID");
+  ASSERT_EQ(code, 0) << output_;
+  auto runs = Invocations();
+  ASSERT_EQ(runs.size(), 2u) << output_;
+  EXPECT_NE(runs[0].find("particles.0002.h5part"), std::string::npos);
+  EXPECT_NE(runs[1].find("particles.0003.h5part"), std::string::npos);
+  EXPECT_TRUE(fs::exists(root_ / "out/cache/.rime-bake/records/surface.0003.json"));
+
+  fs::remove(root_ / "invocations.log");
+  ASSERT_EQ(RunBake("fake.toml", root_ / "out", "surface", true), 0) << output_;
+  runs = Invocations();
+  ASSERT_EQ(runs.size(), 2u) << output_;  // frames 0 and 1 only
+  EXPECT_NE(runs[0].find("particles.0000.h5part"), std::string::npos);
+  EXPECT_NE(runs[1].find("particles.0001.h5part"), std::string::npos);
+  EXPECT_FALSE(fs::exists(root_ / "out/cache/.rime-bake/records/surface.0003.json")) << "folded into state.json";
+  ASSERT_EQ(RunBake("fake.toml", root_ / "out", "surface", true), 0) << output_;
+  EXPECT_EQ(TotalRan(), 0) << output_;
+}
+
 TEST_F(Farm, BakeMatchesALocalBakeByteForByte) {
   if (!ClusterUp()) GTEST_SKIP() << cluster_problem_;
   ASSERT_EQ(RunBake("real.toml", root_ / "local", "cleanup -j 2", false), 0) << output_;
@@ -317,6 +347,13 @@ TEST_F(Farm, BakeMatchesALocalBakeByteForByte) {
 
 TEST_F(Farm, FailedFrameIsReportedWithItsLogAndResubmittedAlone) {
   if (!ClusterUp()) GTEST_SKIP() << cluster_problem_;
+  // A submission the scheduler refuses stops with its message and leaves nothing submitted.
+  std::ofstream(root_ / "bad_partition.toml") << "[farm]\npartition = \"no_such_partition\"\n";
+  EXPECT_EQ(RunBake("fake.toml", root_ / "out", "cleanup --farm slurm --farm-config " + (root_ / "bad_partition.toml").string(), true), 9)
+      << output_;
+  EXPECT_NE(output_.find("sbatch refused the boundary job: sbatch: error: invalid partition"), std::string::npos) << output_;
+  EXPECT_FALSE(fs::exists(root_ / "out/cache/.rime-bake/farm-jobs.json"));
+
   const std::string farm = "cleanup --farm-config " + (root_ / "site1.toml").string();
   setenv("FAKE_FAIL", "surface:2", 1);  // exported to the tasks with the submitter's environment
   ASSERT_EQ(RunBake("fake.toml", root_ / "out", farm + " --farm slurm", true), 0) << output_;
