@@ -67,7 +67,6 @@ class Runner {
   /// Why each job would run (empty: up to date). A job downstream of one that would run is listed
   /// too, since it reruns unless early cutoff finds the upstream output byte-identical.
   std::vector<std::vector<std::string>> Plan();
-  const std::vector<Job>& jobs() const { return jobs_; }
 
  private:
   struct Impl;

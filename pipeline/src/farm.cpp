@@ -635,6 +635,7 @@ int FarmTask(const FarmContext& farm, const std::string& group, int chunk, const
       int failed_queries = 0;
       bool announced = false;
       while (!(fs::exists(frame) && marker_key() == sim_key)) {
+        if (Interrupted()) throw Error(ExitCode::kInterrupted, fmt::format("{}: interrupted while waiting for frame {}", job->id, job->frame));
         const std::optional<bool> alive = JobAlive(sim_job);
         if (!alive && ++failed_queries > 120) throw Refused(fmt::format("cannot ask Slurm whether simulation job {} still runs", sim_job));
         if (alive == false) {

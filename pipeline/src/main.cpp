@@ -133,7 +133,7 @@ int main(int argc, char** argv) {
       std::optional<fs::path> site_file;
       if (!farm_config.empty()) site_file = farm_config;
       else if (const char* env = std::getenv("RIME_FARM_CONFIG"); env && *env) site_file = env;
-      context.settings = LoadFarmSettings(site_file, scene_file);
+      if (farm_task.empty()) context.settings = LoadFarmSettings(site_file, scene_file);  // a task runs what was submitted
       const fs::path bin_dir = context.settings.bin_dir.empty() ? ExecutableFolder() : fs::path(context.settings.bin_dir);
       context.node_rime_bake = bin_dir / "rime-bake";
       context.node_tools = tools_folder.empty() && !context.settings.bin_dir.empty() ? bin_dir : context.graph.tools_folder;
@@ -142,7 +142,10 @@ int main(int argc, char** argv) {
       context.force = force;
       nlohmann::json summary = {{"scene", scene_file}, {"output", layout.output.string()}, {"dry_run", dry_run}};
       int code = 0;
-      if (!farm_task.empty()) return FarmTask(context, farm_task, farm_chunk, farm_sim_job);
+      if (!farm_task.empty()) {
+        InstallSignalHandlers();  // Slurm's SIGTERM (scancel, time limit) stops the tool; its job stays incomplete
+        return FarmTask(context, farm_task, farm_chunk, farm_sim_job);
+      }
       if (farm == "status") code = FarmStatus(context, summary);
       else if (farm == "cancel") code = FarmCancel(context, summary);
       else {

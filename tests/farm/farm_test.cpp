@@ -424,6 +424,7 @@ TEST_F(Farm, CancelLeavesNoJobAndNothingThatLooksFinished) {
   EXPECT_LT(status["stages"]["surface"]["done"], kFakeLastFrame + 1) << output_;
   ASSERT_EQ(RunBake("fake.toml", root_ / "out", "cleanup", true), 0) << output_;
   EXPECT_EQ(summary_["stages"]["sim"]["ran"], 1) << output_;
+  EXPECT_NE(ReadFile(root_ / "out/cache/logs/sim.log").find("--resume"), std::string::npos) << "the cancelled simulation continues";
   ASSERT_EQ(RunBake("fake.toml", root_ / "reference", "cleanup", true), 0) << output_;
   EXPECT_TRUE(Outputs(root_ / "out") == Outputs(root_ / "reference"));
 }
