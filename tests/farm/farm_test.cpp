@@ -269,6 +269,13 @@ TEST_F(Farm, DryRunShowsTheJobChainAndSettingsAreValidated) {
   EXPECT_EQ(sim_line().find("--gres"), std::string::npos) << output_;
   EXPECT_NE(sim_line().find("--cpus-per-task=3"), std::string::npos) << output_;
 
+  // The scene's [farm] keys override the site file's.
+  std::ofstream(root_ / "own_chunk.toml") << kFakeScene << "\n[farm]\nchunk = 1\n";
+  ASSERT_EQ(RunBake("own_chunk.toml", root_ / "out", "cleanup --farm slurm --dry-run --farm-config " + (root_ / "site.toml").string(), true), 0)
+      << output_;
+  EXPECT_NE(output_.find("--array=0-3"), std::string::npos) << output_;
+  EXPECT_NE(output_.find("--time=10"), std::string::npos) << output_;
+
   std::ofstream(root_ / "fake.toml", std::ios::app) << "\n[farm]\nchunk = 0\n";
   EXPECT_EQ(RunBake("fake.toml", root_ / "out", "--farm slurm --dry-run", true), 3) << output_;
   EXPECT_NE(output_.find("fake.toml:" + std::to_string(std::count(kFakeScene, kFakeScene + std::strlen(kFakeScene), '\n') + 3) + ": farm.chunk"),
