@@ -279,6 +279,7 @@ BakeResult Runner::Run() {
     for (std::size_t i = 0; i < n; ++i) {
       selected[i] = std::find(options_.farm_jobs.begin(), options_.farm_jobs.end(), jobs_[i].id) != options_.farm_jobs.end();
       if (!selected[i]) impl.status[i] = Status::kDone;  // another farm task's business
+      else if (options_.force) impl.forced.insert(i);
     }
   } else if (options_.only) {
     std::vector<std::string> problems;

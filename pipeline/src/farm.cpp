@@ -426,6 +426,7 @@ int FarmSubmit(const FarmContext& farm, bool resubmit, json& summary) {
                                            "--farm-task", planned.group, "--farm-chunk", std::to_string(chunk)};
     args.insert(args.end(), task.begin(), task.end());
     if (!sim_job.empty()) args.insert(args.end(), {"--farm-sim-job", sim_job});
+    if (farm.force) args.push_back("--force");
 
     if (farm.dry_run) {
       std::printf("%s\n", CommandLine(sbatch, args).c_str());
@@ -653,6 +654,7 @@ int FarmTask(const FarmContext& farm, const std::string& group, int chunk, const
     RunOptions run;
     run.farm_task = true;
     run.farm_jobs = {job->id};
+    run.force = farm.force;
     Runner runner(*farm.doc, layout, jobs, run);
     const BakeResult result = runner.Run();
     if (result.exit_code != 0) throw Error(static_cast<ExitCode>(result.exit_code), result.failure);

@@ -304,14 +304,20 @@ TEST_F(Farm, TaskRunsItsChunkAndLocalBakeAdoptsItsRecords) {
   EXPECT_NE(output_.find("filesystem every node sees"), std::string::npos) << output_;
   std::ofstream(root_ / "out/cache/.rime-bake/farm-task.sh") << "#!/bin/sh\n";  // what a submission writes first
   fs::remove(root_ / "invocations.log");
-  const int code = RunBake("fake.toml", root_ / "out", task, true);
+  ASSERT_EQ(RunBake("fake.toml", root_ / "out", task, true), 0) << output_;
   unsetenv("SLURM_ARRAY_TASK_ID");
-  ASSERT_EQ(code, 0) << output_;
   auto runs = Invocations();
   ASSERT_EQ(runs.size(), 2u) << output_;
   EXPECT_NE(runs[0].find("particles.0002.h5part"), std::string::npos);
   EXPECT_NE(runs[1].find("particles.0003.h5part"), std::string::npos);
   EXPECT_TRUE(fs::exists(root_ / "out/cache/.rime-bake/records/surface.0003.json"));
+  fs::remove(root_ / "invocations.log");
+  setenv("SLURM_ARRAY_TASK_ID", "1", 1);
+  ASSERT_EQ(RunBake("fake.toml", root_ / "out", task, true), 0) << output_;
+  EXPECT_TRUE(Invocations().empty()) << "the task's frames are up to date";
+  ASSERT_EQ(RunBake("fake.toml", root_ / "out", task + " --force", true), 0) << output_;
+  unsetenv("SLURM_ARRAY_TASK_ID");
+  EXPECT_EQ(Invocations().size(), 2u) << "--force (passed on by --farm slurm --force) reruns them";
 
   fs::remove(root_ / "invocations.log");
   ASSERT_EQ(RunBake("fake.toml", root_ / "out", "surface", true), 0) << output_;
