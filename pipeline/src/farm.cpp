@@ -11,6 +11,7 @@
 #include <set>
 #include <sstream>
 #include <thread>
+#include <tuple>
 
 #include "bake_runner.h"
 #include "process.h"
@@ -492,7 +493,8 @@ int FarmStatus(const FarmContext& farm, json& summary) {
   enum State { kDone, kQueued, kRunning, kFailed, kMissing, kStates };
   static constexpr const char* kStateNames[kStates] = {"done", "queued", "running", "failed", "missing"};
   std::array<std::array<int, kStates>, kStageCount> counts{};
-  std::map<std::pair<int, int>, std::vector<std::int64_t>> frames_by;  // (stage, state) -> frames
+  // Per group (a whole-scene job or a per-frame stage) and state: its frames, in pipeline order.
+  std::vector<std::tuple<std::string, int, std::vector<std::int64_t>>> frames_by;
   std::string details;
   json listed = json::array();
   int failed = 0;
@@ -530,7 +532,11 @@ int FarmStatus(const FarmContext& farm, json& summary) {
                         {"slurm_task", slurm_task}, {"slurm_state", slurm_state}, {"log", log.string()}});
     }
     ++counts[static_cast<int>(job.stage)][state];
-    if (state != kDone) frames_by[{static_cast<int>(job.stage), state}].push_back(job.frame);
+    if (state == kDone || state == kFailed) continue;  // failed jobs are listed one by one below the table
+    auto it = std::find_if(frames_by.begin(), frames_by.end(),
+                           [&](const auto& entry) { return std::get<0>(entry) == GroupOf(job) && std::get<1>(entry) == state; });
+    if (it == frames_by.end()) it = frames_by.insert(frames_by.end(), {GroupOf(job), state, {}});
+    std::get<2>(*it).push_back(job.frame);
   }
 
   std::string table = fmt::format("{:<10} {:>6} {:>7} {:>8} {:>7} {:>8}\n", "stage", "done", "queued", "running", "failed", "missing");
@@ -542,11 +548,8 @@ int FarmStatus(const FarmContext& farm, json& summary) {
                          c[kFailed], c[kMissing]);
     for (int k = 0; k < kStates; ++k) stages[StageName(static_cast<Stage>(s))][kStateNames[k]] = c[k];
   }
-  for (const auto& [key, frames] : frames_by) {
-    if (key.second == kFailed) continue;
-    const bool whole = frames.size() == 1 && frames.front() < 0;
-    table += fmt::format("{}{}: {}\n", StageName(static_cast<Stage>(key.first)), whole ? "" : " frames " + Ranges(frames), kStateNames[key.second]);
-  }
+  for (const auto& [group, state, frames] : frames_by)
+    table += fmt::format("{}{}: {}\n", group, frames.front() < 0 ? "" : " frames " + Ranges(frames), kStateNames[state]);
   std::printf("%s%s", table.c_str(), details.c_str());
   int missing = 0;
   for (const auto& c : counts) missing += c[kMissing];

@@ -405,6 +405,26 @@ TEST_F(Farm, FailedFrameIsReportedWithItsLogAndResubmittedAlone) {
   EXPECT_TRUE(Invocations().empty());
 }
 
+// With Blender on the PATH the preview stage runs too: an array paired with the cleanup's and the
+// movie job after the whole array (fake Blender and ffmpeg).
+TEST_F(Farm, PreviewFramesAndMovieRunOnTheFarm) {
+  if (!ClusterUp()) GTEST_SKIP() << cluster_problem_;
+  bake::testing::WriteFakePreviewTools(root_ / "preview_tools");
+  const std::string path = std::getenv("PATH");
+  setenv("PATH", ((root_ / "preview_tools").string() + ":" + path).c_str(), 1);
+  const int code = RunBake("fake.toml", root_ / "out", "all --farm slurm --farm-config " + (root_ / "site.toml").string(), true);
+  std::vector<std::string> groups;
+  for (const auto& s : summary_["submitted"]) groups.push_back(s["group"]);
+  const json status = WaitForFarm("fake.toml", root_ / "out", true);  // the same Blender, so the same keys
+  setenv("PATH", path.c_str(), 1);
+  ASSERT_EQ(code, 0) << output_;
+  EXPECT_EQ(groups, (std::vector<std::string>{"boundary", "sim", "surface", "cleanup", "preview", "preview.movie"}));
+  EXPECT_EQ(status["stages"]["preview"]["done"], kFakeLastFrame + 2) << output_;  // every frame and the movie
+  EXPECT_EQ(Count(status, "failed") + Count(status, "missing"), 0) << output_;
+  for (int f = 0; f <= kFakeLastFrame; ++f) EXPECT_TRUE(fs::exists(root_ / fmt::format("out/preview/frame.{:04}.png", f))) << f;
+  EXPECT_TRUE(fs::exists(root_ / "out/preview/preview.mp4"));
+}
+
 TEST_F(Farm, CancelLeavesNoJobAndNothingThatLooksFinished) {
   if (!ClusterUp()) GTEST_SKIP() << cluster_problem_;
   const std::string farm = "cleanup --farm-config " + (root_ / "site.toml").string();
