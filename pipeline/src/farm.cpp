@@ -247,11 +247,11 @@ void WriteJobs(const BakeLayout& layout, const JobsRecord& record) {
 }
 
 std::vector<std::string> AliveJobIds(const JobsRecord& record, const std::map<std::string, std::string>& queue) {
+  std::set<std::string> queued_jobs;  // "123" for "123" and for its array tasks "123_4"
+  for (const auto& [id, state] : queue) queued_jobs.insert(id.substr(0, id.find('_')));
   std::vector<std::string> alive;
-  for (const auto& s : record.submissions) {
-    const auto it = queue.lower_bound(s.job_id);
-    if (it != queue.end() && (it->first == s.job_id || it->first.rfind(s.job_id + "_", 0) == 0)) alive.push_back(s.job_id);
-  }
+  for (const auto& s : record.submissions)
+    if (queued_jobs.count(s.job_id)) alive.push_back(s.job_id);
   return alive;
 }
 
