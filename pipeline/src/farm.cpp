@@ -396,19 +396,19 @@ int FarmSubmit(const FarmContext& farm, bool resubmit, json& summary) {
     const int cpus = is_sim && site.sim_cpus_per_task > 0 ? site.sim_cpus_per_task : site.cpus_per_task;
     args.push_back(fmt::format("--cpus-per-task={}", cpus));
     if (is_sim && site.gpus && farm.graph.device != "cpu") args.push_back("--gres=" + site.gpu_gres);
-    if (planned.per_frame) args.push_back("--array=" + Ranges(tasks));
 
     // Wait for the nearest upstream group submitted now: per frame (`aftercorr`) between arrays,
-    // for the simulation's start when this array streams its frames, else for success. Jobs of
-    // earlier submissions still in the queue (resubmit) only have to end: a task whose input is
-    // then missing fails with a clear message.
+    // for the simulation's start when this array streams its frames (at most stream_tasks tasks
+    // at once until the simulation ends: the tasks lift that throttle then), else for success.
+    // Jobs of earlier submissions still in the queue (resubmit) only have to end: a task whose
+    // input is then missing fails with a clear message.
     std::vector<std::string> dependencies;
     std::string sim_job;
     for (std::size_t u = g; u-- > 0;) {
       if (groups[u].stale == 0) continue;
       const std::string id = farm.dry_run ? fmt::format("<{} job>", groups[u].group) : groups[u].job_id;
       if (planned.per_frame && groups[u].per_frame) dependencies.push_back("aftercorr:" + id);
-      else if (planned.per_frame && groups[u].stage == Stage::kSim) {
+      else if (planned.per_frame && groups[u].stage == Stage::kSim && site.stream_tasks > 0) {
         dependencies.push_back("after:" + id);
         sim_job = id;
       } else {
@@ -416,6 +416,8 @@ int FarmSubmit(const FarmContext& farm, bool resubmit, json& summary) {
       }
       break;
     }
+    if (planned.per_frame)
+      args.push_back("--array=" + Ranges(tasks) + (sim_job.empty() ? std::string() : fmt::format("%{}", site.stream_tasks)));
     for (std::size_t u = 0; u < g; ++u)
       for (const auto& id : groups[u].alive_jobs) dependencies.push_back("afterany:" + id);
     if (!dependencies.empty()) args.push_back(fmt::format("--dependency={}", fmt::join(dependencies, ",")));
@@ -627,6 +629,17 @@ int FarmTask(const FarmContext& farm, const std::string& group, int chunk, const
 
   const fs::path sim_marker = IncompleteMarker(layout, "sim");
   std::string sim_key;
+  // Once the simulation has ended, every task of this array may start: lift the throttle that kept
+  // all but a few of them from waiting for frames meanwhile (any task that notices does it).
+  bool throttle_lifted = sim_job.empty() || !std::getenv("SLURM_ARRAY_JOB_ID");
+  const auto lift_throttle_once_sim_ended = [&](std::optional<bool> sim_alive) {
+    if (throttle_lifted || (sim_alive ? *sim_alive : JobAlive(sim_job) != false)) return;
+    const Captured r = CaptureProcess(SlurmCommand("scontrol"),
+                                      {"update", fmt::format("JobId={}", std::getenv("SLURM_ARRAY_JOB_ID")), "ArrayTaskThrottle=0"});
+    // Finished tasks make scontrol exit non-zero ("Job has already finished"); the rest say "No error".
+    if (r.code != 0 && r.err.find("No error") == std::string::npos) log::Warn("cannot lift the array's throttle: {}", OneLine(r.err));
+    throttle_lifted = true;
+  };
   for (const Job* job : selected) {
     if (!sim_job.empty() && !job->inputs.empty()) {
       // The simulation job streams frames: one is final once it exists under the incomplete
@@ -643,6 +656,7 @@ int FarmTask(const FarmContext& farm, const std::string& group, int chunk, const
         const std::optional<bool> alive = JobAlive(sim_job);
         if (!alive && ++failed_queries > 120) throw Refused(fmt::format("cannot ask Slurm whether simulation job {} still runs", sim_job));
         if (alive == false) {
+          lift_throttle_once_sim_ended(false);
           const std::string key = marker_key();
           if (fs::exists(frame) && (key.empty() || key == sim_key)) break;
           throw Error(static_cast<ExitCode>(kExitStageFailed),
@@ -663,6 +677,7 @@ int FarmTask(const FarmContext& farm, const std::string& group, int chunk, const
     if (result.exit_code != 0) throw Error(static_cast<ExitCode>(result.exit_code), result.failure);
     const StageSummary& s = result.stages[static_cast<int>(job->stage)];
     log::Info("{}: {}", job->id, s.ran ? fmt::format("done in {}", FormatDuration(s.seconds)) : std::string("up to date"));
+    lift_throttle_once_sim_ended(std::nullopt);
   }
   log::Info("farm task {} finished at {:.3f} s since the epoch", group, now());
   return 0;

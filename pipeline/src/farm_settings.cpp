@@ -56,6 +56,7 @@ void ParseFarmTable(io::TomlReader t, FarmSettings& f) {
   ParsePerStage(t.Table("time"), f.time, kTime, "a Slurm time limit (minutes, H:M:S or D-H:M:S)");
   ParsePerStage(t.Table("memory"), f.memory, kMemory, "a Slurm memory size (e.g. 4000M or 16G)");
   f.chunk = static_cast<int>(t.Integer("chunk", f.chunk, io::Range::Closed(1, 100000)));
+  f.stream_tasks = static_cast<int>(t.Integer("stream_tasks", f.stream_tasks, io::Range::Closed(0, 100000)));
   f.cpus_per_task = static_cast<int>(t.Integer("cpus_per_task", f.cpus_per_task, io::Range::Closed(1, 4096)));
   f.sim_cpus_per_task = static_cast<int>(t.Integer("sim_cpus_per_task", f.sim_cpus_per_task, io::Range::Closed(0, 4096)));
   f.gpus = t.Bool("gpus", f.gpus);

@@ -20,6 +20,9 @@ struct FarmSettings {
   /// Per stage, Slurm's `--time` and `--mem` values; empty: the partition's defaults.
   std::array<std::string, kStageCount> time{}, memory{};
   int chunk = 1;              // frames per array task of the per-frame stages
+  /// Surface tasks that may start while the simulation runs, each waiting for its frames (the
+  /// rest start once the simulation has ended); 0: the surface array waits for it to succeed.
+  int stream_tasks = 4;
   int cpus_per_task = 1;      // per-frame and boundary tasks
   int sim_cpus_per_task = 0;  // the simulation when it runs on CPUs; 0: cpus_per_task
   bool gpus = false;          // the simulation's partition has GPUs

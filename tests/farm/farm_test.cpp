@@ -152,8 +152,9 @@ class Farm : public ::testing::Test {
     bake::testing::WriteFakeTools(root_ / "tools");
     std::ofstream(root_ / "real.toml") << kRealScene;
     std::ofstream(root_ / "fake.toml") << kFakeScene;
-    // Two frames per array task; the simulation takes one CPU so a surface task can run beside it.
-    std::ofstream(root_ / "site.toml") << "[farm]\nchunk = 2\ncpus_per_task = 1\n\n[farm.time]\ndefault = \"10\"\n";
+    // Two frames per array task; the simulation takes one CPU so a surface task can run beside it,
+    // and one surface task at a time waits for frames until the simulation ends.
+    std::ofstream(root_ / "site.toml") << "[farm]\nchunk = 2\ncpus_per_task = 1\nstream_tasks = 1\n\n[farm.time]\ndefault = \"10\"\n";
     // One frame per task: a failing frame then stops no other frame.
     std::ofstream(root_ / "site1.toml") << "[farm]\nchunk = 1\n";
     setenv("FAKE_LOG", (root_ / "invocations.log").c_str(), 1);
@@ -246,7 +247,8 @@ TEST_F(Farm, DryRunShowsTheJobChainAndSettingsAreValidated) {
   ASSERT_EQ(RunBake("fake.toml", root_ / "out", "cleanup --farm slurm --dry-run --explain --farm-config " + (root_ / "site.toml").string(), true), 0)
       << output_;
   EXPECT_NE(output_.find("# surface.0003: "), std::string::npos) << output_;
-  EXPECT_NE(output_.find("--array=0-1"), std::string::npos) << output_;  // 4 frames, 2 per task
+  EXPECT_NE(output_.find("--array=0-1%1"), std::string::npos) << output_;  // 4 frames, 2 per task; 1 may wait for frames
+  EXPECT_NE(output_.find("--array=0-1 "), std::string::npos) << output_;    // cleanup: no throttle
   EXPECT_NE(output_.find("'--dependency=afterok:<boundary job>'"), std::string::npos) << output_;
   EXPECT_NE(output_.find("'--dependency=after:<sim job>'"), std::string::npos) << output_;
   EXPECT_NE(output_.find("'--dependency=aftercorr:<surface job>'"), std::string::npos) << output_;
@@ -273,8 +275,13 @@ TEST_F(Farm, DryRunShowsTheJobChainAndSettingsAreValidated) {
   std::ofstream(root_ / "own_chunk.toml") << kFakeScene << "\n[farm]\nchunk = 1\n";
   ASSERT_EQ(RunBake("own_chunk.toml", root_ / "out", "cleanup --farm slurm --dry-run --farm-config " + (root_ / "site.toml").string(), true), 0)
       << output_;
-  EXPECT_NE(output_.find("--array=0-3"), std::string::npos) << output_;
+  EXPECT_NE(output_.find("--array=0-3%1"), std::string::npos) << output_;  // the site file's stream_tasks stays
   EXPECT_NE(output_.find("--time=10"), std::string::npos) << output_;
+  // Without streaming the surface array waits for the simulation to succeed.
+  std::ofstream(root_ / "no_stream.toml") << kFakeScene << "\n[farm]\nstream_tasks = 0\n";
+  ASSERT_EQ(RunBake("no_stream.toml", root_ / "out", "cleanup --farm slurm --dry-run", true), 0) << output_;
+  EXPECT_NE(output_.find("'--dependency=afterok:<sim job>'"), std::string::npos) << output_;
+  EXPECT_EQ(output_.find("--farm-sim-job"), std::string::npos) << output_;
 
   std::ofstream(root_ / "fake.toml", std::ios::app) << "\n[farm]\nchunk = 0\n";
   EXPECT_EQ(RunBake("fake.toml", root_ / "out", "--farm slurm --dry-run", true), 3) << output_;
