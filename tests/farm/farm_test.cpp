@@ -143,7 +143,10 @@ class Farm : public ::testing::Test {
   static void TearDownTestSuite() {
     delete cluster_;
     cluster_ = nullptr;
+    // The cluster's logs are kept for a failed run only.
+    if (::testing::UnitTest::GetInstance()->failed_test_count() == 0) fs::remove_all(ClusterFolder());
   }
+  static fs::path ClusterFolder() { return fs::temp_directory_path() / fmt::format("rime_farm_slurm_{}", getpid()); }
 
   void SetUp() override {
     root_ = fs::temp_directory_path() / fmt::format("rime_farm_{}_{}", ::testing::UnitTest::GetInstance()->current_test_info()->name(), getpid());
@@ -175,7 +178,7 @@ class Farm : public ::testing::Test {
       return false;
     }
     cluster_ = new testing::LocalSlurm;
-    const std::string problem = cluster_->Start(fs::temp_directory_path() / fmt::format("rime_farm_slurm_{}", getpid()));
+    const std::string problem = cluster_->Start(ClusterFolder());
     if (!problem.empty()) {
       delete cluster_;
       cluster_ = nullptr;
