@@ -10,6 +10,7 @@ PACKAGES=(
   libeigen3-dev libtbb-dev libfmt-dev libxxhash-dev
   libhdf5-dev hdf5-tools libtomlplusplus-dev libcli11-dev libgtest-dev nlohmann-json3-dev
   libassimp-dev libopenvdb-dev libopenvdb-tools libboost-iostreams-dev libcgal-dev
+  slurm-wlm  # the farm test starts a single-node Slurm cluster on localhost (tests/farm)
 )
 
 missing=()

@@ -52,7 +52,7 @@ std::vector<std::string> SectionsReadBy(Stage stage, const SceneDocument& doc) {
     case Stage::kSim: {
       std::vector<std::string> sections;
       for (const auto& s : doc.sections())
-        if (s != "surface" && s != "cleanup" && s != "bake") sections.push_back(s);
+        if (s != "surface" && s != "cleanup" && s != "bake" && s != "farm") sections.push_back(s);
       return sections;
     }
     case Stage::kSurface:  // [freezing] holds the ice anisotropy parameters (k_r, k_n, N_eps) it may reuse

@@ -36,15 +36,6 @@ std::string ReadSmallFile(const fs::path& path) {
   return text.str();
 }
 
-// Last non-empty line of a log: stage tools end a failure with `tool: error: ...`.
-std::string LastLine(const fs::path& log) {
-  std::ifstream in(log);
-  std::string line, last;
-  while (std::getline(in, line))
-    if (line.find_first_not_of(" \t\r") != std::string::npos) last = line;
-  return last;
-}
-
 std::string DescribeComponent(const std::string& component) {
   if (component == "tool") return "the tool binary";
   if (component == "command") return "the command line";
@@ -89,7 +80,7 @@ struct Runner::Impl {
   BakeResult result;
   bool stop = false;
 
-  fs::path Marker(const Job& job) const { return runner.layout_.state_folder() / "incomplete" / job.id; }
+  fs::path Marker(const Job& job) const { return IncompleteMarker(runner.layout_, job.id); }
 
   // The state is rewritten at most every couple of seconds (it lists every file, so saving after
   // each of thousands of frame jobs would be quadratic) and at the end. A job whose record was not
@@ -181,7 +172,7 @@ struct Runner::Impl {
              fmt::format("interrupted during stage {}{}; rerun the same command to continue (log: {})", StageName(job.stage),
                          FrameSuffix(job), job.log.string()));
       } else {
-        const std::string last = LastLine(job.log);
+        const std::string last = LastLogLine(job.log);
         Fail(job, kExitStageFailed,
              fmt::format("stage {} failed{} ({} exited with code {}{}); log: {}", StageName(job.stage), FrameSuffix(job), job.tool_name, code,
                          last.empty() ? "" : ": " + last, job.log.string()));
@@ -211,8 +202,19 @@ struct Runner::Impl {
   }
 };
 
+std::string LastLogLine(const fs::path& log) {
+  std::ifstream in(log);
+  std::string line, last;
+  while (std::getline(in, line))
+    if (line.find_first_not_of(" \t\r") != std::string::npos) last = line;
+  return last;
+}
+
+fs::path IncompleteMarker(const BakeLayout& layout, const std::string& job_id) { return layout.state_folder() / "incomplete" / job_id; }
+
 Runner::Runner(const SceneDocument& doc, const BakeLayout& layout, std::vector<Job> jobs, RunOptions options)
     : doc_(doc), layout_(layout), jobs_(std::move(jobs)), options_(options), state_(layout.output, layout.state_folder() / "state.json") {
+  if (options_.farm_task) state_.UsePerJobRecords();
   state_.Load();
 }
 
@@ -235,7 +237,7 @@ Verdict Runner::Evaluate(const Job& job) {
   for (const auto& [name, value] : c) all += name + "=" + value + "\n";
   v.fresh.key = HexHash(Hash64(all));
 
-  if (fs::exists(layout_.state_folder() / "incomplete" / job.id)) v.reasons.push_back("left incomplete by an interrupted or failed run");
+  if (fs::exists(IncompleteMarker(layout_, job.id))) v.reasons.push_back("left incomplete by an interrupted or failed run");
   const auto record = state_.Record(job.id);
   if (!record) {
     if (v.reasons.empty()) v.reasons.push_back("never built");
@@ -273,7 +275,13 @@ BakeResult Runner::Run() {
 
   // --only STAGE: the selected jobs always run; every job upstream of them must be up to date.
   std::vector<bool> selected(n, true);
-  if (options_.only) {
+  if (options_.farm_task) {
+    for (std::size_t i = 0; i < n; ++i) {
+      selected[i] = std::find(options_.farm_jobs.begin(), options_.farm_jobs.end(), jobs_[i].id) != options_.farm_jobs.end();
+      if (!selected[i]) impl.status[i] = Status::kDone;  // another farm task's business
+      else if (options_.force) impl.forced.insert(i);
+    }
+  } else if (options_.only) {
     std::vector<std::string> problems;
     for (std::size_t i = 0; i < n; ++i) {
       selected[i] = jobs_[i].stage == *options_.only;
@@ -303,31 +311,18 @@ BakeResult Runner::Run() {
   }
 
   if (options_.dry_run) {
-    // Jobs downstream of a job that would run are listed too: they rerun unless early cutoff finds
-    // the upstream output byte-identical.
-    std::set<std::string> would_run;
+    const auto reasons = Plan(selected, impl.forced);
     for (std::size_t i = 0; i < n; ++i) {
       if (!selected[i]) continue;
       const Job& job = jobs_[i];
-      std::vector<std::string> reasons;
-      for (const auto& dep : job.dependencies)
-        if (would_run.count(dep)) {
-          reasons.push_back(fmt::format("after {} reruns (skipped then if its output comes out identical)", dep));
-          break;
-        }
-      if (reasons.empty()) {
-        reasons = Evaluate(job).reasons;
-        if (reasons.empty() && impl.forced.count(i)) reasons.push_back("requested (--only/--force)");
-      }
       StageSummary& summary = impl.result.stages[static_cast<int>(job.stage)];
-      if (reasons.empty()) {
+      if (reasons[i].empty()) {
         ++summary.cached;
         if (options_.explain) std::printf("# %s: up to date\n", job.id.c_str());
         continue;
       }
-      would_run.insert(job.id);
       ++summary.ran;
-      if (options_.explain) std::printf("# %s: %s\n", job.id.c_str(), fmt::format("{}", fmt::join(reasons, "; ")).c_str());
+      if (options_.explain) std::printf("# %s: %s\n", job.id.c_str(), fmt::format("{}", fmt::join(reasons[i], "; ")).c_str());
       std::printf("%s\n", CommandLine(job.program, job.args).c_str());
     }
     std::fflush(stdout);
@@ -338,13 +333,16 @@ BakeResult Runner::Run() {
   fs::create_directories(layout_.logs());
   fs::create_directories(layout_.state_folder());
   // One bake per output folder at a time: two would overwrite each other's outputs and state.
+  // Farm tasks share the lock: each runs different jobs and writes its own records.
   const fs::path lock_path = layout_.state_folder() / "lock";
   const int lock_fd = open(lock_path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
-  if (lock_fd < 0 || flock(lock_fd, LOCK_EX | LOCK_NB) != 0) {
+  if (lock_fd < 0 || flock(lock_fd, (options_.farm_task ? LOCK_SH : LOCK_EX) | LOCK_NB) != 0) {
     if (lock_fd >= 0) close(lock_fd);
     BakeResult busy;
     busy.exit_code = static_cast<int>(ExitCode::kIo);
-    busy.failure = fmt::format("another rime-bake is baking into {} (lock {})", layout_.output.string(), lock_path.string());
+    busy.failure = options_.farm_task
+                       ? fmt::format("a local rime-bake is baking into {} (lock {}); farm tasks cannot run beside it", layout_.output.string(), lock_path.string())
+                       : fmt::format("another rime-bake is baking into {} (lock {})", layout_.output.string(), lock_path.string());
     return busy;
   }
   struct LockRelease {
@@ -467,6 +465,33 @@ BakeResult Runner::Run() {
   }
   impl.result.seconds = std::chrono::duration<double>(Clock::now() - start).count();
   return impl.result;
+}
+
+std::vector<std::vector<std::string>> Runner::Plan() {
+  std::set<std::size_t> forced;
+  if (options_.force)
+    for (std::size_t i = 0; i < jobs_.size(); ++i) forced.insert(i);
+  return Plan(std::vector<bool>(jobs_.size(), true), forced);
+}
+
+std::vector<std::vector<std::string>> Runner::Plan(const std::vector<bool>& selected, const std::set<std::size_t>& forced) {
+  std::vector<std::vector<std::string>> reasons(jobs_.size());
+  std::set<std::string> would_run;
+  for (std::size_t i = 0; i < jobs_.size(); ++i) {
+    if (!selected[i]) continue;
+    const Job& job = jobs_[i];
+    for (const auto& dep : job.dependencies)
+      if (would_run.count(dep)) {
+        reasons[i].push_back(fmt::format("after {} reruns (skipped then if its output comes out identical)", dep));
+        break;
+      }
+    if (reasons[i].empty()) {
+      reasons[i] = Evaluate(job).reasons;
+      if (reasons[i].empty() && forced.count(i)) reasons[i].push_back("requested (--only/--force)");
+    }
+    if (!reasons[i].empty()) would_run.insert(job.id);
+  }
+  return reasons;
 }
 
 std::string SummaryTable(const BakeResult& result, bool preview_skipped) {

@@ -6,6 +6,7 @@
 
 #include <array>
 #include <optional>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -24,6 +25,10 @@ struct RunOptions {
   bool dry_run = false;       // print the commands that would run
   bool explain = false;       // print why each job is stale
   int parallel_frames = 1;    // -j
+  /// Farm task: run just these jobs (other tasks bring their inputs up to date), beside other farm
+  /// tasks: the bake lock is taken shared and each job's record is written to its own file.
+  bool farm_task = false;
+  std::vector<std::string> farm_jobs;
 };
 
 struct StageSummary {
@@ -47,15 +52,25 @@ struct Verdict {
   bool stale() const { return !reasons.empty(); }
 };
 
+/// Last non-empty line of a log: stage tools end a failure with `tool: error: ...`.
+std::string LastLogLine(const std::filesystem::path& log);
+
+/// Present while a job runs, holding its key; left behind when it fails or is interrupted.
+std::filesystem::path IncompleteMarker(const BakeLayout& layout, const std::string& job_id);
+
 class Runner {
  public:
   Runner(const SceneDocument& doc, const BakeLayout& layout, std::vector<Job> jobs, RunOptions options);
   BakeResult Run();
   /// Staleness of one job against the recorded state (no side effects besides stamp updates).
   Verdict Evaluate(const Job& job);
+  /// Why each job would run (empty: up to date). A job downstream of one that would run is listed
+  /// too, since it reruns unless early cutoff finds the upstream output byte-identical.
+  std::vector<std::vector<std::string>> Plan();
 
  private:
   struct Impl;
+  std::vector<std::vector<std::string>> Plan(const std::vector<bool>& selected, const std::set<std::size_t>& forced);
   const SceneDocument& doc_;
   BakeLayout layout_;
   std::vector<Job> jobs_;

@@ -13,7 +13,25 @@ using nlohmann::json;
 namespace rime::bake {
 namespace {
 constexpr const char* kFormat = "rime.bake-state";
+constexpr const char* kRecordFormat = "rime.bake-record";
 constexpr int kVersion = 1;
+
+json RecordJson(const JobRecord& r) { return {{"key", r.key}, {"components", r.components}, {"outputs", r.outputs}, {"seconds", r.seconds}}; }
+
+JobRecord ParseRecord(const json& j) {
+  JobRecord r;
+  r.key = j.at("key").get<std::string>();
+  r.components = j.at("components").get<std::map<std::string, std::string>>();
+  r.outputs = j.at("outputs").get<std::map<std::string, std::string>>();
+  r.seconds = j.value("seconds", 0.0);
+  return r;
+}
+
+json StampJson(const FileStamp& s) { return {{"size", s.size}, {"mtime_ns", s.mtime_ns}, {"hash", s.hash}}; }
+FileStamp ParseStamp(const json& f) {
+  return FileStamp{f.at("size").get<std::uint64_t>(), f.at("mtime_ns").get<std::int64_t>(), f.at("hash").get<std::string>()};
+}
+
 }  // namespace
 
 BakeState::BakeState(fs::path output_dir, fs::path state_file)
@@ -26,51 +44,85 @@ std::string BakeState::Name(const fs::path& file) const {
   return absolute.generic_string();
 }
 
+fs::path BakeState::RecordFolder() const { return state_file_.parent_path() / "records"; }
+
 void BakeState::Load() {
   std::lock_guard lock(mutex_);
   files_.clear();
   jobs_.clear();
+  changed_.clear();
+  merged_records_.clear();
   std::ifstream in(state_file_);
-  if (!in) return;
-  try {
-    const json root = json::parse(in);
-    if (root.value("format", "") != kFormat || root.value("version", 0) != kVersion) {
-      log::Warn("ignoring {}: not a rime-bake state file of version {}; everything counts as stale", state_file_.string(), kVersion);
-      return;
+  if (in) {
+    try {
+      const json root = json::parse(in);
+      if (root.value("format", "") != kFormat || root.value("version", 0) != kVersion) {
+        log::Warn("ignoring {}: not a rime-bake state file of version {}; everything counts as stale", state_file_.string(), kVersion);
+        return;
+      }
+      for (const auto& [name, f] : root.at("files").items()) files_[name] = ParseStamp(f);
+      for (const auto& [id, j] : root.at("jobs").items()) jobs_[id] = ParseRecord(j);
+    } catch (const std::exception& e) {
+      log::Warn("ignoring corrupt state file {} ({}); everything counts as stale", state_file_.string(), e.what());
+      files_.clear();
+      jobs_.clear();
     }
-    for (const auto& [name, f] : root.at("files").items())
-      files_[name] = FileStamp{f.at("size").get<std::uint64_t>(), f.at("mtime_ns").get<std::int64_t>(), f.at("hash").get<std::string>()};
-    for (const auto& [id, j] : root.at("jobs").items()) {
-      JobRecord r;
-      r.key = j.at("key").get<std::string>();
-      r.components = j.at("components").get<std::map<std::string, std::string>>();
-      r.outputs = j.at("outputs").get<std::map<std::string, std::string>>();
-      r.seconds = j.value("seconds", 0.0);
-      jobs_[id] = std::move(r);
+  }
+  std::error_code ec;
+  for (const auto& entry : fs::directory_iterator(RecordFolder(), ec)) {
+    if (entry.path().extension() != ".json") continue;  // skips temporaries of records being written
+    try {
+      std::ifstream record_in(entry.path());
+      const json root = json::parse(record_in);
+      if (root.value("format", "") != kRecordFormat || root.value("version", 0) != kVersion) throw std::runtime_error("unknown format");
+      jobs_[root.at("job").get<std::string>()] = ParseRecord(root.at("record"));
+      for (const auto& [name, f] : root.at("files").items()) files_[name] = ParseStamp(f);
+      merged_records_.push_back(entry.path());
+    } catch (const std::exception& e) {
+      log::Warn("ignoring corrupt job record {} ({}); its job counts as stale", entry.path().string(), e.what());
     }
-  } catch (const std::exception& e) {
-    log::Warn("ignoring corrupt state file {} ({}); everything counts as stale", state_file_.string(), e.what());
-    files_.clear();
-    jobs_.clear();
   }
 }
 
 void BakeState::Save() {
+  if (per_job_records_) {
+    std::map<std::string, std::string> texts;  // job id -> record file text
+    {
+      std::lock_guard lock(mutex_);
+      for (const auto& id : changed_) {
+        const JobRecord& r = jobs_.at(id);
+        json files = json::object();
+        for (const auto& [name, hash] : r.outputs)
+          if (const auto it = files_.find(name); it != files_.end()) files[name] = StampJson(it->second);
+        const json root = {{"format", kRecordFormat}, {"version", kVersion}, {"job", id}, {"record", RecordJson(r)}, {"files", files}};
+        texts[id] = root.dump(1) + "\n";
+      }
+      changed_.clear();
+    }
+    fs::create_directories(RecordFolder());
+    for (const auto& [id, text] : texts) WriteFileAtomically(RecordFolder() / (id + ".json"), text);
+    return;
+  }
   json root;
+  std::vector<fs::path> merged;
   {
     std::lock_guard lock(mutex_);
     root["format"] = kFormat;
     root["version"] = kVersion;
     json files = json::object();
-    for (const auto& [name, s] : files_) files[name] = {{"size", s.size}, {"mtime_ns", s.mtime_ns}, {"hash", s.hash}};
+    for (const auto& [name, s] : files_) files[name] = StampJson(s);
     json jobs = json::object();
-    for (const auto& [id, r] : jobs_)
-      jobs[id] = {{"key", r.key}, {"components", r.components}, {"outputs", r.outputs}, {"seconds", r.seconds}};
+    for (const auto& [id, r] : jobs_) jobs[id] = RecordJson(r);
     root["files"] = std::move(files);
     root["jobs"] = std::move(jobs);
+    merged.swap(merged_records_);
   }
   fs::create_directories(state_file_.parent_path());
   WriteFileAtomically(state_file_, root.dump(1) + "\n");
+  for (const auto& file : merged) {
+    std::error_code ec;
+    fs::remove(file, ec);
+  }
 }
 
 std::optional<std::string> BakeState::ContentHash(const fs::path& file) {
@@ -105,6 +157,7 @@ std::optional<JobRecord> BakeState::Record(const std::string& job_id) const {
 void BakeState::SetRecord(const std::string& job_id, JobRecord record) {
   std::lock_guard lock(mutex_);
   jobs_[job_id] = std::move(record);
+  changed_.insert(job_id);
 }
 
 void BakeState::EraseRecord(const std::string& job_id) {

@@ -8,7 +8,9 @@
 #include <map>
 #include <mutex>
 #include <optional>
+#include <set>
 #include <string>
+#include <vector>
 
 namespace rime::bake {
 
@@ -34,10 +36,16 @@ class BakeState {
  public:
   BakeState(std::filesystem::path output_dir, std::filesystem::path state_file);
 
-  /// Reads the state file if it exists; a corrupt or foreign file is reported and ignored.
+  /// Reads the state file if it exists, then the per-job record files (see UsePerJobRecords), which
+  /// are newer; a corrupt or foreign file is reported and ignored.
   void Load();
-  /// Writes the state atomically.
+  /// Writes the state atomically. With per-job records: writes one file per job recorded since
+  /// Load instead. Otherwise the per-job files read by Load are folded into the state file and
+  /// removed (the caller holds the bake lock exclusively, so no farm task is writing them).
   void Save();
+  /// Farm tasks run side by side on many nodes and must not rewrite each other's state file: each
+  /// writes its own records to `<state folder>/records/<job>.json`, read back by every Load.
+  void UsePerJobRecords() { per_job_records_ = true; }
 
   /// Content hash of a file, reusing the recorded one when size and mtime match; nullopt if missing.
   std::optional<std::string> ContentHash(const std::filesystem::path& file);
@@ -50,11 +58,16 @@ class BakeState {
   std::string Name(const std::filesystem::path& file) const;
 
  private:
+  std::filesystem::path RecordFolder() const;
+
   std::filesystem::path output_dir_;
   std::filesystem::path state_file_;
   mutable std::mutex mutex_;
   std::map<std::string, FileStamp> files_;
   std::map<std::string, JobRecord> jobs_;
+  bool per_job_records_ = false;
+  std::set<std::string> changed_;                     // jobs recorded since Load
+  std::vector<std::filesystem::path> merged_records_; // per-job files read by Load
 };
 
 }  // namespace rime::bake

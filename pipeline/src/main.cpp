@@ -6,6 +6,7 @@
 
 #include "bake_graph.h"
 #include "bake_runner.h"
+#include "farm.h"
 #include "preview_script.h"
 #include "process.h"
 #include "rime/core/error.h"
@@ -41,12 +42,35 @@ int main(int argc, char** argv) {
   app.add_flag("--clean", clean, "Delete everything this bake produced for the scene (output stages and cache), then stop");
   app.add_option("-o,--output", output, "Output folder (default: out/<scene name>); the cache lives in <output>/cache");
   app.add_option("--tools", tools_folder, "Folder holding rime-boundary, rime-sim, rime-surface, rime-clean (default: rime-bake's own folder)");
+  std::string farm, farm_config, farm_task, farm_sim_job;
+  int farm_chunk = 1;
+  app.add_option("--farm", farm,
+                 "Bake on a Slurm cluster (docs/farm.md): slurm submits the stale jobs and exits; status shows each stage and frame; "
+                 "resubmit submits what failed or is missing; cancel cancels this bake's jobs")
+      ->check(CLI::IsMember({"slurm", "status", "resubmit", "cancel"}));
+  app.add_option("--farm-config", farm_config, "Site settings for --farm: a TOML file with a [farm] table (default: $RIME_FARM_CONFIG); "
+                                               "the scene's own [farm] table overrides it");
+  // What a farm task runs on a node (written by --farm slurm, not typed by users).
+  app.add_option("--farm-task", farm_task)->group("");
+  app.add_option("--farm-chunk", farm_chunk)->group("")->check(CLI::PositiveNumber);
+  app.add_option("--farm-sim-job", farm_sim_job)->group("");
   app.footer(
       "Exit codes: 0 ok (everything up to the target is up to date), 1 internal failure, 2 bad command line, 3 bad scene file or "
       "missing stage tool, 5 cannot write the output or cache (or another rime-bake is using it), 7 a stage failed (the message names stage, frame and log), "
-      "8 --only refused (inputs missing or stale), 130 interrupted (rerun to continue; the simulation resumes).");
+      "8 --only refused (inputs missing or stale), 9 --farm: Slurm's commands missing or a submission refused, 130 interrupted (rerun to continue; the simulation resumes).");
 
   return tool::Main(app, argc, argv, common, [&]() -> int {
+    // The farm verbs default to the target and frames of the last submission.
+    const bool farm_verb = farm == "status" || farm == "resubmit" || farm == "cancel";
+    if (farm_verb && (app.count("target") == 0 || app.count("--frames") == 0)) {
+      BakeLayout recorded_layout;
+      recorded_layout.output = output;
+      if (output.empty()) recorded_layout.output = fs::path("out") / SceneDocument::Load(scene_file).scene().info.name;
+      if (const auto recorded = RecordedFarmBake(recorded_layout)) {
+        if (app.count("target") == 0) target_name = recorded->target;
+        if (app.count("--frames") == 0) common.frames = fmt::format("{}-{}", recorded->first, recorded->last);
+      }
+    }
     const auto target = ParseStage(target_name == "all" ? "preview" : target_name);
     if (!target) throw Error(ExitCode::kUsage, fmt::format("unknown target '{}' (boundary, sim, surface, cleanup, preview, all)", target_name));
     std::optional<Stage> only;
@@ -61,6 +85,7 @@ int main(int argc, char** argv) {
     layout.output = output.empty() ? fs::path("out") / doc.scene().info.name : fs::path(output);
 
     if (clean) {
+      RefuseWhileFarmJobsAlive(layout);
       for (const fs::path& folder : {layout.cache(), layout.surface(), layout.clean(), layout.preview()}) {
         std::error_code ec;
         const auto removed = fs::remove_all(folder, ec);
@@ -79,6 +104,11 @@ int main(int argc, char** argv) {
     graph.last_frame = frames.last;
     const int cores = std::max(1u, std::thread::hardware_concurrency());
     graph.cpu_threads = parallel_frames > 1 ? std::max(1, cores / parallel_frames) : 0;
+    if (!farm_task.empty()) {
+      // A farm task gives each tool the CPUs Slurm allocated to it.
+      const char* allocated = std::getenv("SLURM_CPUS_PER_TASK");
+      graph.cpu_threads = allocated ? std::max(1, std::atoi(allocated)) : 0;
+    }
     graph.device = common.device;
     graph.blender = FindOnPath("blender");
     graph.ffmpeg = FindOnPath("ffmpeg");
@@ -89,6 +119,44 @@ int main(int argc, char** argv) {
     else if (last_stage == Stage::kPreview && !graph.ffmpeg)
       log::Info("ffmpeg is not on PATH: the preview stage renders PNG frames only (no contact sheet, no MP4)");
     if (only == Stage::kPreview && !graph.blender) return 0;
+
+    if (!farm.empty() || !farm_task.empty()) {
+      if (only) throw Error(ExitCode::kUsage, "--only cannot be combined with --farm");
+      FarmContext context;
+      context.doc = &doc;
+      context.layout = layout;
+      context.layout.scene_file = fs::absolute(scene_file).lexically_normal();
+      context.layout.output = fs::absolute(layout.output).lexically_normal();
+      context.graph = graph;
+      context.graph.tools_folder = fs::absolute(graph.tools_folder);
+      context.target = last_stage;
+      std::optional<fs::path> site_file;
+      if (!farm_config.empty()) site_file = farm_config;
+      else if (const char* env = std::getenv("RIME_FARM_CONFIG"); env && *env) site_file = env;
+      if (farm_task.empty()) context.settings = LoadFarmSettings(site_file, scene_file);  // a task runs what was submitted
+      const fs::path bin_dir = context.settings.bin_dir.empty() ? ExecutableFolder() : fs::path(context.settings.bin_dir);
+      context.node_rime_bake = bin_dir / "rime-bake";
+      context.node_tools = tools_folder.empty() && !context.settings.bin_dir.empty() ? bin_dir : context.graph.tools_folder;
+      context.dry_run = dry_run;
+      context.explain = explain;
+      context.force = force;
+      nlohmann::json summary = {{"scene", scene_file}, {"output", layout.output.string()}, {"dry_run", dry_run}};
+      int code = 0;
+      if (!farm_task.empty()) {
+        InstallSignalHandlers();  // Slurm's SIGTERM (scancel, time limit) stops the tool; its job stays incomplete
+        return FarmTask(context, farm_task, farm_chunk, farm_sim_job);
+      }
+      if (farm == "status") code = FarmStatus(context, summary);
+      else if (farm == "cancel") code = FarmCancel(context, summary);
+      else {
+        if (!dry_run && last_stage == Stage::kPreview && graph.blender) WritePreviewFiles(doc, context.layout);
+        code = FarmSubmit(context, farm == "resubmit", summary);
+      }
+      summary["exit_code"] = code;
+      tool::WriteSummary(common, summary);
+      return code;
+    }
+    if (!dry_run) RefuseWhileFarmJobsAlive(layout);
 
     std::vector<Job> jobs = BuildGraph(doc, layout, graph, last_stage);
     if (!dry_run && std::any_of(jobs.begin(), jobs.end(), [](const Job& j) { return j.stage == Stage::kPreview; }))

@@ -14,6 +14,14 @@ namespace rime::bake {
 /// Running tools get SIGTERM when rime-bake receives SIGINT/SIGTERM (see InstallSignalHandlers).
 int RunProcess(const std::filesystem::path& program, const std::vector<std::string>& args, const std::filesystem::path& log);
 
+/// What a client program (sbatch, squeue) printed, and how it ended.
+struct Captured {
+  int code = 0;  // exit status, 128 + signal, or 127 when it could not be started
+  std::string out, err;
+};
+/// Runs `program args...` to completion with stdout and stderr captured (argument vector, no shell).
+Captured CaptureProcess(const std::filesystem::path& program, const std::vector<std::string>& args);
+
 /// Forwards SIGINT/SIGTERM to running tools and records that the bake was interrupted.
 void InstallSignalHandlers();
 bool Interrupted();

@@ -285,6 +285,7 @@ Scene ParseScene(const std::string& text, const fs::path& file) {
     t.RejectUnknownKeys();
   }
   top.Skip("bake");  // read by rime-bake (pipeline/)
+  top.Skip("farm");  // cluster settings, read by rime-bake --farm (pipeline/)
   top.RejectUnknownKeys();
   return scene;
 }

@@ -12,12 +12,14 @@
 
 #include <algorithm>
 #include <cstring>
+#include <fstream>
 #include <functional>
 #include <numeric>
 
 #include "grids.h"
 #include "rime/core/atomic_file.h"
 #include "rime/core/error.h"
+#include "rime/core/hash.h"
 #include "rime/core/union_find.h"
 #include "rime/exec/parallel.h"
 
@@ -237,6 +239,31 @@ std::uint64_t ExtractMesh(const openvdb::FloatGrid& grid, bool keep_voids, io::T
   return dropped;
 }
 
+namespace {
+
+// OpenVDB stamps every file with a random UUID (36 characters after the 21-byte header start).
+// Replacing it with one derived from the rest of the file makes the same grids the same bytes on
+// every run: bakes are reproducible byte for byte, and rime-bake's early cutoff sees unchanged VDBs.
+void DeriveVdbUuidFromContent(const std::filesystem::path& file) {
+  constexpr std::streamoff kOffset = 21;
+  constexpr std::size_t kLength = 36;
+  std::fstream io(file, std::ios::in | std::ios::out | std::ios::binary);
+  char uuid[kLength];
+  if (!io.seekg(kOffset) || !io.read(uuid, kLength)) return;
+  if (uuid[8] != '-' || uuid[13] != '-' || uuid[18] != '-' || uuid[23] != '-') return;  // not the layout this expects
+  io.seekp(kOffset);
+  io.write("00000000-0000-0000-0000-000000000000", kLength);
+  io.flush();
+  const std::uint64_t a = HashFile(file), b = Hash64(HexHash(a), 1);
+  std::string derived = fmt::format("{:08x}-{:04x}-5{:03x}-{:04x}-{:012x}", a >> 32, (a >> 16) & 0xffff, a & 0xfff,
+                                    0x8000 | ((b >> 48) & 0x3fff), b & 0xffffffffffffULL);  // name-based (version 5) form
+  io.seekp(kOffset);
+  io.write(derived.data(), kLength);
+  if (!io.flush()) throw IoError("cannot write VDB file", file.string());
+}
+
+}  // namespace
+
 void WriteVdb(const std::filesystem::path& path, const Result& result) {
   InitializeOpenVdb();
   openvdb::GridPtrVec grids;
@@ -253,6 +280,7 @@ void WriteVdb(const std::filesystem::path& path, const Result& result) {
   } catch (const openvdb::Exception& e) {
     throw IoError(fmt::format("cannot write VDB file: {}", e.what()), path.string());
   }
+  DeriveVdbUuidFromContent(atomic.temp_path());
   atomic.Commit();
 }
 

@@ -1,0 +1,476 @@
+// rime-bake --farm on a real single-node Slurm cluster on localhost (local_slurm.h): a farm bake
+// writes the same bytes as a local bake (reports: the same apart from timings) and leaves a state both agree is up to date; a failed frame
+// is reported with its log and resubmitted alone; a cancelled bake leaves no job and nothing that
+// looks finished. The settings and --dry-run checks need no cluster.
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cstring>
+#include <filesystem>
+#include <fmt/format.h>
+#include <fstream>
+#include <map>
+#include <nlohmann/json.hpp>
+#include <set>
+#include <sstream>
+#include <thread>
+
+#include "fake_tools.h"
+#include "local_slurm.h"
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+namespace rime {
+namespace {
+
+// About 1 700 water particles falling onto a sphere; 0.25 s at 20 fps = frames 0..5.
+const char* kRealScene = R"([scene]
+name = "farm"
+fps = 20
+end_time = 0.25
+
+[water]
+spacing = 0.025
+
+[simulation]
+modules = ["gravity", "viscosity", "surface_tension", "freezing"]
+
+[domain]
+min = [-0.5, -0.5, -0.05]
+max = [0.5, 0.5, 0.8]
+
+[[solid]]
+name = "ground"
+shape = "plane"
+size = [1.0, 1.0, 1.0]
+
+[[solid]]
+name = "ball"
+shape = "sphere"
+radius = 0.12
+translate = [0.0, 0.0, 0.2]
+
+[[water_block]]
+min = [-0.15, -0.15, 0.4]
+max = [0.15, 0.15, 0.55]
+
+[surface]
+phase = "water"
+)";
+
+// For the fake stage tools (pipeline/tests/fake_tools.h): frames 0..3.
+constexpr int kFakeLastFrame = 3;
+const char* kFakeScene = R"([scene]
+fps = 2
+end_time = 1.5
+
+[water]
+spacing = 0.05
+
+[simulation]
+modules = ["gravity"]
+
+[[solid]]
+name = "ground"
+shape = "plane"
+size = [1.0, 1.0, 1.0]
+
+[[water_block]]
+min = [0.0, 0.0, 0.1]
+max = [0.2, 0.2, 0.3]
+)";
+
+constexpr auto kFarmTimeout = std::chrono::seconds(150);
+
+std::string ReadFile(const fs::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  std::stringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+void DropTimings(json& value) {
+  if (value.is_object()) {
+    for (auto it = value.begin(); it != value.end();) {
+      if (it.key().find("seconds") != std::string::npos) it = value.erase(it);
+      else DropTimings(*it++);
+    }
+  } else if (value.is_array()) {
+    for (auto& item : value) DropTimings(item);
+  }
+}
+
+// Every file a bake leaves outside its own bookkeeping (state, logs), by path relative to `root`.
+// Reports (.json, .jsonl) record how long each step took and where the output folder is: those
+// fields are left out (timings dropped, the folder written as $OUT); every other byte counts.
+std::map<std::string, std::string> Outputs(const fs::path& root) {
+  std::map<std::string, std::string> files;
+  for (const auto& entry : fs::recursive_directory_iterator(root)) {
+    if (!entry.is_regular_file()) continue;
+    const std::string name = entry.path().lexically_relative(root).generic_string();
+    if (name.rfind("cache/.rime-bake/", 0) == 0 || name.rfind("cache/logs/", 0) == 0) continue;
+    std::string bytes = ReadFile(entry.path());
+    const std::string ext = entry.path().extension().string();
+    if (ext == ".json" || ext == ".jsonl") {
+      std::vector<std::string> records = {bytes};
+      if (ext == ".jsonl") {
+        records.clear();
+        std::istringstream lines(bytes);
+        for (std::string line; std::getline(lines, line);) records.push_back(line);
+      }
+      bytes.clear();
+      for (const auto& record : records) {
+        json value = json::parse(record, nullptr, false);
+        DropTimings(value);
+        bytes += value.dump() + "\n";
+      }
+      for (std::size_t at; (at = bytes.find(root.string())) != std::string::npos;) bytes.replace(at, root.string().size(), "$OUT");
+    }
+    files[name] = bytes;
+  }
+  return files;
+}
+
+class Farm : public ::testing::Test {
+ protected:
+  static inline testing::LocalSlurm* cluster_ = nullptr;
+  static inline std::string cluster_problem_;
+
+  static void TearDownTestSuite() {
+    delete cluster_;
+    cluster_ = nullptr;
+    // The cluster's logs are kept for a failed run only.
+    if (::testing::UnitTest::GetInstance()->failed_test_count() == 0) fs::remove_all(ClusterFolder());
+  }
+  static fs::path ClusterFolder() { return fs::temp_directory_path() / fmt::format("rime_farm_slurm_{}", getpid()); }
+
+  void SetUp() override {
+    root_ = fs::temp_directory_path() / fmt::format("rime_farm_{}_{}", ::testing::UnitTest::GetInstance()->current_test_info()->name(), getpid());
+    fs::remove_all(root_);
+    fs::create_directories(root_);
+    bake::testing::WriteFakeTools(root_ / "tools");
+    std::ofstream(root_ / "real.toml") << kRealScene;
+    std::ofstream(root_ / "fake.toml") << kFakeScene;
+    // Two frames per array task; the simulation takes one CPU so a surface task can run beside it,
+    // and one surface task at a time waits for frames until the simulation ends.
+    std::ofstream(root_ / "site.toml") << "[farm]\nchunk = 2\ncpus_per_task = 1\nstream_tasks = 1\n\n[farm.time]\ndefault = \"10\"\n";
+    // One frame per task: a failing frame then stops no other frame.
+    std::ofstream(root_ / "site1.toml") << "[farm]\nchunk = 1\n";
+    setenv("FAKE_LOG", (root_ / "invocations.log").c_str(), 1);
+    setenv("FAKE_FRAMES", std::to_string(kFakeLastFrame).c_str(), 1);
+    unsetenv("FAKE_FAIL");
+    unsetenv("FAKE_SIM_SLEEP");
+    unsetenv("RIME_FARM_CONFIG");
+  }
+  void TearDown() override {
+    if (!HasFailure()) fs::remove_all(root_);
+  }
+
+  /// Starts the cluster once for the whole suite; the caller skips when Slurm is not installed.
+  static bool ClusterUp() {
+    if (cluster_) return true;
+    if (const auto missing = testing::LocalSlurm::MissingBinary()) {
+      cluster_problem_ = fmt::format("Slurm is not installed ({} not found; Debian: apt install slurm-wlm)", *missing);
+      return false;
+    }
+    cluster_ = new testing::LocalSlurm;
+    const std::string problem = cluster_->Start(ClusterFolder());
+    if (!problem.empty()) {
+      delete cluster_;
+      cluster_ = nullptr;
+      ADD_FAILURE() << "cannot start the localhost Slurm cluster: " << problem;
+      return false;
+    }
+    return true;
+  }
+
+  /// Runs rime-bake with `args` (a scene under root_ named by `scene`); returns its exit code,
+  /// stdout+stderr in output_ and the JSON summary in summary_.
+  int RunBake(const std::string& scene, const fs::path& out, const std::string& args, bool fake_tools) {
+    std::string command = fmt::format("'{}' '{}' -o '{}' --json-summary '{}' {}", RIME_BINARY_DIR "/bin/rime-bake", (root_ / scene).string(),
+                                      out.string(), (root_ / "summary.json").string(), args);
+    if (fake_tools) command += fmt::format(" --tools '{}'", (root_ / "tools").string());
+    fs::remove(root_ / "summary.json");
+    const int status = std::system((command + " > '" + (root_ / "bake.txt").string() + "' 2>&1").c_str());
+    output_ = ReadFile(root_ / "bake.txt");
+    summary_ = json::parse(ReadFile(root_ / "summary.json"), nullptr, false);
+    return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  }
+
+  /// Polls `--farm status` until no job of the bake is queued or running; returns the last status.
+  json WaitForFarm(const std::string& scene, const fs::path& out, bool fake_tools) {
+    const auto deadline = std::chrono::steady_clock::now() + kFarmTimeout;
+    while (std::chrono::steady_clock::now() < deadline) {
+      RunBake(scene, out, "--farm status", fake_tools);
+      if (summary_.is_discarded()) return summary_;
+      bool busy = false;
+      for (const auto& [stage, counts] : summary_["stages"].items()) busy = busy || counts["queued"] > 0 || counts["running"] > 0;
+      if (!busy) return summary_;
+      std::this_thread::sleep_for(std::chrono::seconds(1));
+    }
+    ADD_FAILURE() << "the farm bake did not finish within " << kFarmTimeout.count() << " s:\n"
+                  << output_ << testing::LocalSlurm::Capture("squeue 2>&1");
+    return summary_;
+  }
+
+  static int Count(const json& status, const std::string& state) {
+    int n = 0;
+    for (const auto& [stage, counts] : status["stages"].items()) n += counts[state].get<int>();
+    return n;
+  }
+  int TotalRan() const {
+    int ran = 0;
+    for (const auto& [stage, s] : summary_["stages"].items()) ran += s["ran"].get<int>();
+    return ran;
+  }
+  std::vector<std::string> Invocations() const {
+    std::vector<std::string> lines;
+    std::ifstream in(root_ / "invocations.log");
+    for (std::string line; std::getline(in, line);) lines.push_back(line);
+    return lines;
+  }
+  const json* StatusOf(const json& status, const std::string& id) const {
+    for (const auto& job : status["jobs"])
+      if (job["id"] == id) return &job;
+    return nullptr;
+  }
+
+  fs::path root_;
+  std::string output_;
+  json summary_;
+};
+
+// Settings errors name file, line and key; the dry run shows the sbatch commands (arrays chained
+// per frame, the surface array streaming the simulation's frames) without any cluster.
+TEST_F(Farm, DryRunShowsTheJobChainAndSettingsAreValidated) {
+  ASSERT_EQ(RunBake("fake.toml", root_ / "out", "cleanup --farm slurm --dry-run --explain --farm-config " + (root_ / "site.toml").string(), true), 0)
+      << output_;
+  EXPECT_NE(output_.find("# surface.0003: "), std::string::npos) << output_;
+  EXPECT_NE(output_.find("--array=0-1%1"), std::string::npos) << output_;  // 4 frames, 2 per task; 1 may wait for frames
+  EXPECT_NE(output_.find("--array=0-1 "), std::string::npos) << output_;    // cleanup: no throttle
+  EXPECT_NE(output_.find("'--dependency=afterok:<boundary job>'"), std::string::npos) << output_;
+  EXPECT_NE(output_.find("'--dependency=after:<sim job>'"), std::string::npos) << output_;
+  EXPECT_NE(output_.find("'--dependency=aftercorr:<surface job>'"), std::string::npos) << output_;
+  EXPECT_NE(output_.find("--time=10"), std::string::npos) << output_;
+  EXPECT_NE(output_.find("--farm-task surface"), std::string::npos) << output_;
+  EXPECT_FALSE(fs::exists(root_ / "out/cache/.rime-bake/farm-jobs.json"));
+
+  // The simulation asks for a GPU only where the site has them and the device allows it.
+  std::ofstream(root_ / "gpu_site.toml") << "[farm]\ngpus = true\nsim_partition = \"gpu\"\ncpus_per_task = 3\n";
+  const auto sim_line = [&] {
+    const auto at = output_.find("--job-name=rime:fake:sim");
+    return at == std::string::npos ? std::string() : output_.substr(at, output_.find('\n', at) - at);
+  };
+  const std::string gpu_site = "--farm slurm --dry-run --farm-config " + (root_ / "gpu_site.toml").string();
+  ASSERT_EQ(RunBake("fake.toml", root_ / "out", gpu_site + " --device cuda", true), 0) << output_;
+  EXPECT_NE(sim_line().find("--gres=gpu:1"), std::string::npos) << output_;
+  EXPECT_NE(sim_line().find("--partition=gpu"), std::string::npos) << output_;
+  EXPECT_EQ(output_.find("--gres=gpu:1"), output_.rfind("--gres=gpu:1")) << "only the simulation asks for a GPU:\n" << output_;
+  ASSERT_EQ(RunBake("fake.toml", root_ / "out", gpu_site + " --device cpu", true), 0) << output_;
+  EXPECT_EQ(sim_line().find("--gres"), std::string::npos) << output_;
+  EXPECT_NE(sim_line().find("--cpus-per-task=3"), std::string::npos) << output_;
+
+  // The scene's [farm] keys override the site file's.
+  std::ofstream(root_ / "own_chunk.toml") << kFakeScene << "\n[farm]\nchunk = 1\n";
+  ASSERT_EQ(RunBake("own_chunk.toml", root_ / "out", "cleanup --farm slurm --dry-run --farm-config " + (root_ / "site.toml").string(), true), 0)
+      << output_;
+  EXPECT_NE(output_.find("--array=0-3%1"), std::string::npos) << output_;  // the site file's stream_tasks stays
+  EXPECT_NE(output_.find("--time=10"), std::string::npos) << output_;
+  // Without streaming the surface array waits for the simulation to succeed.
+  std::ofstream(root_ / "no_stream.toml") << kFakeScene << "\n[farm]\nstream_tasks = 0\n";
+  ASSERT_EQ(RunBake("no_stream.toml", root_ / "out", "cleanup --farm slurm --dry-run", true), 0) << output_;
+  EXPECT_NE(output_.find("'--dependency=afterok:<sim job>'"), std::string::npos) << output_;
+  EXPECT_EQ(output_.find("--farm-sim-job"), std::string::npos) << output_;
+
+  std::ofstream(root_ / "fake.toml", std::ios::app) << "\n[farm]\nchunk = 0\n";
+  EXPECT_EQ(RunBake("fake.toml", root_ / "out", "--farm slurm --dry-run", true), 3) << output_;
+  EXPECT_NE(output_.find("fake.toml:" + std::to_string(std::count(kFakeScene, kFakeScene + std::strlen(kFakeScene), '\n') + 3) + ": farm.chunk"),
+            std::string::npos)
+      << output_;
+  std::ofstream(root_ / "bad_site.toml") << "[farm]\n[farm.time]\nsim = \"two hours\"\n";
+  EXPECT_EQ(RunBake("real.toml", root_ / "out", "--farm slurm --dry-run --farm-config " + (root_ / "bad_site.toml").string(), true), 3) << output_;
+  EXPECT_NE(output_.find("bad_site.toml:3: farm.time.sim"), std::string::npos) << output_;
+
+  // Without Slurm's commands on PATH a submission stops with one clear line.
+  const std::string path = std::getenv("PATH");
+  setenv("PATH", "/nonexistent", 1);
+  const int code = RunBake("real.toml", root_ / "out", "--farm slurm", true);
+  setenv("PATH", path.c_str(), 1);
+  EXPECT_EQ(code, 9) << output_;
+  EXPECT_NE(output_.find("sbatch not found on PATH"), std::string::npos) << output_;
+}
+
+// What a node runs, without Slurm: a task of the surface array (index 1 of 2-frame chunks) runs
+// frames 2-3 only and records them in per-job files that a later local bake takes as up to date.
+TEST_F(Farm, TaskRunsItsChunkAndLocalBakeAdoptsItsRecords) {
+  ASSERT_EQ(RunBake("fake.toml", root_ / "out", "sim", true), 0) << output_;
+  const std::string task = "surface --frames 0-3 --farm-task surface --farm-chunk 2";
+  setenv("SLURM_ARRAY_TASK_ID", "1", 1);
+  EXPECT_EQ(RunBake("fake.toml", root_ / "out", task, true), 5) << output_;  // no submission: the cache counts as not shared
+  EXPECT_NE(output_.find("filesystem every node sees"), std::string::npos) << output_;
+  std::ofstream(root_ / "out/cache/.rime-bake/farm-task.sh") << "#!/bin/sh\n";  // what a submission writes first
+  fs::remove(root_ / "invocations.log");
+  ASSERT_EQ(RunBake("fake.toml", root_ / "out", task, true), 0) << output_;
+  unsetenv("SLURM_ARRAY_TASK_ID");
+  auto runs = Invocations();
+  ASSERT_EQ(runs.size(), 2u) << output_;
+  EXPECT_NE(runs[0].find("particles.0002.h5part"), std::string::npos);
+  EXPECT_NE(runs[1].find("particles.0003.h5part"), std::string::npos);
+  EXPECT_TRUE(fs::exists(root_ / "out/cache/.rime-bake/records/surface.0003.json"));
+  fs::remove(root_ / "invocations.log");
+  setenv("SLURM_ARRAY_TASK_ID", "1", 1);
+  ASSERT_EQ(RunBake("fake.toml", root_ / "out", task, true), 0) << output_;
+  EXPECT_TRUE(Invocations().empty()) << "the task's frames are up to date";
+  ASSERT_EQ(RunBake("fake.toml", root_ / "out", task + " --force", true), 0) << output_;
+  unsetenv("SLURM_ARRAY_TASK_ID");
+  EXPECT_EQ(Invocations().size(), 2u) << "--force (passed on by --farm slurm --force) reruns them";
+
+  fs::remove(root_ / "invocations.log");
+  ASSERT_EQ(RunBake("fake.toml", root_ / "out", "surface", true), 0) << output_;
+  runs = Invocations();
+  ASSERT_EQ(runs.size(), 2u) << output_;  // frames 0 and 1 only
+  EXPECT_NE(runs[0].find("particles.0000.h5part"), std::string::npos);
+  EXPECT_NE(runs[1].find("particles.0001.h5part"), std::string::npos);
+  EXPECT_FALSE(fs::exists(root_ / "out/cache/.rime-bake/records/surface.0003.json")) << "folded into state.json";
+  ASSERT_EQ(RunBake("fake.toml", root_ / "out", "surface", true), 0) << output_;
+  EXPECT_EQ(TotalRan(), 0) << output_;
+}
+
+TEST_F(Farm, BakeMatchesALocalBakeByteForByte) {
+  if (!ClusterUp()) GTEST_SKIP() << cluster_problem_;
+  ASSERT_EQ(RunBake("real.toml", root_ / "local", "cleanup -j 2", false), 0) << output_;
+
+  const std::string farm = "cleanup --farm-config " + (root_ / "site.toml").string();
+  ASSERT_EQ(RunBake("real.toml", root_ / "farm", farm + " --farm slurm", false), 0) << output_;
+  ASSERT_EQ(summary_["submitted"].size(), 4u) << output_;  // boundary, sim, surface, cleanup
+  const json status = WaitForFarm("real.toml", root_ / "farm", false);
+  EXPECT_EQ(Count(status, "failed") + Count(status, "missing"), 0) << output_;
+  EXPECT_EQ(Count(status, "done"), 2 + 2 * 6) << output_;
+
+  const auto local = Outputs(root_ / "local"), farmed = Outputs(root_ / "farm");
+  EXPECT_GT(local.size(), 30u);
+  for (const auto& [name, bytes] : local) {
+    const auto it = farmed.find(name);
+    if (it == farmed.end()) ADD_FAILURE() << name << " is missing from the farm bake";
+    else EXPECT_TRUE(it->second == bytes) << name << " differs between the farm and the local bake";
+  }
+  for (const auto& [name, bytes] : farmed) EXPECT_TRUE(local.count(name)) << name << " was written by the farm bake only";
+
+  // A second submission finds everything up to date; so does a local bake of the farm's output.
+  ASSERT_EQ(RunBake("real.toml", root_ / "farm", farm + " --farm slurm", false), 0) << output_;
+  EXPECT_TRUE(summary_["submitted"].empty()) << output_;
+  EXPECT_EQ(summary_["stale_jobs"], 0) << output_;
+  ASSERT_EQ(RunBake("real.toml", root_ / "farm", "cleanup", false), 0) << output_;
+  EXPECT_EQ(TotalRan(), 0) << output_;
+}
+
+TEST_F(Farm, FailedFrameIsReportedWithItsLogAndResubmittedAlone) {
+  if (!ClusterUp()) GTEST_SKIP() << cluster_problem_;
+  // A submission the scheduler refuses stops with its message and leaves nothing submitted.
+  std::ofstream(root_ / "bad_partition.toml") << "[farm]\npartition = \"no_such_partition\"\n";
+  EXPECT_EQ(RunBake("fake.toml", root_ / "out", "cleanup --farm slurm --farm-config " + (root_ / "bad_partition.toml").string(), true), 9)
+      << output_;
+  EXPECT_NE(output_.find("sbatch refused the boundary job: sbatch: error: invalid partition"), std::string::npos) << output_;
+  EXPECT_FALSE(fs::exists(root_ / "out/cache/.rime-bake/farm-jobs.json"));
+
+  const std::string farm = "cleanup --farm-config " + (root_ / "site1.toml").string();
+  setenv("FAKE_FAIL", "surface:2", 1);  // exported to the tasks with the submitter's environment
+  ASSERT_EQ(RunBake("fake.toml", root_ / "out", farm + " --farm slurm", true), 0) << output_;
+  unsetenv("FAKE_FAIL");
+  const json status = WaitForFarm("fake.toml", root_ / "out", true);
+  const std::string status_text = output_;
+  EXPECT_EQ(Count(status, "failed"), 1) << status_text;
+  const json* surface = StatusOf(status, "surface.0002");
+  ASSERT_NE(surface, nullptr) << status_text;
+  EXPECT_EQ((*surface)["state"], "failed");
+  const fs::path log = root_ / "out/cache/logs/surface.0002.log";
+  EXPECT_EQ((*surface)["log"], log.string());
+  EXPECT_EQ((*surface)["slurm_state"], "FAILED");
+  EXPECT_NE(ReadFile(log).find("no particles in frame (fake)"), std::string::npos);
+  EXPECT_NE(status_text.find("surface.0002 failed"), std::string::npos) << status_text;
+  EXPECT_NE(status_text.find(log.string()), std::string::npos) << status_text;
+  const json* cleanup = StatusOf(status, "cleanup.0002");
+  ASSERT_NE(cleanup, nullptr) << status_text;
+  EXPECT_EQ((*cleanup)["state"], "missing");  // its dependency failed, so Slurm never ran it
+  EXPECT_EQ(Count(status, "done"), 2 + 2 * (kFakeLastFrame + 1) - 2) << status_text;
+
+  fs::remove(root_ / "invocations.log");
+  ASSERT_EQ(RunBake("fake.toml", root_ / "out", farm + " --farm resubmit", true), 0) << output_;
+  const json after = WaitForFarm("fake.toml", root_ / "out", true);
+  EXPECT_EQ(Count(after, "done"), 2 + 2 * (kFakeLastFrame + 1)) << output_;
+  const auto runs = Invocations();
+  ASSERT_EQ(runs.size(), 2u) << fmt::format("{}", fmt::join(runs, "\n"));
+  EXPECT_EQ(runs[0].rfind("rime-surface ", 0), 0u);
+  EXPECT_NE(runs[0].find("particles.0002.h5part"), std::string::npos);
+  EXPECT_EQ(runs[1].rfind("rime-clean ", 0), 0u);
+  EXPECT_NE(runs[1].find("ice.0002.obj"), std::string::npos);
+
+  fs::remove(root_ / "invocations.log");
+  ASSERT_EQ(RunBake("fake.toml", root_ / "out", "cleanup", true), 0) << output_;
+  EXPECT_EQ(TotalRan(), 0) << output_;
+  EXPECT_TRUE(Invocations().empty());
+}
+
+// With Blender on the PATH the preview stage runs too: an array paired with the cleanup's and the
+// movie job after the whole array (fake Blender and ffmpeg).
+TEST_F(Farm, PreviewFramesAndMovieRunOnTheFarm) {
+  if (!ClusterUp()) GTEST_SKIP() << cluster_problem_;
+  bake::testing::WriteFakePreviewTools(root_ / "preview_tools");
+  const std::string path = std::getenv("PATH");
+  setenv("PATH", ((root_ / "preview_tools").string() + ":" + path).c_str(), 1);
+  const int code = RunBake("fake.toml", root_ / "out", "all --farm slurm --farm-config " + (root_ / "site.toml").string(), true);
+  std::vector<std::string> groups;
+  for (const auto& s : summary_["submitted"]) groups.push_back(s["group"]);
+  const json status = WaitForFarm("fake.toml", root_ / "out", true);  // the same Blender, so the same keys
+  setenv("PATH", path.c_str(), 1);
+  ASSERT_EQ(code, 0) << output_;
+  EXPECT_EQ(groups, (std::vector<std::string>{"boundary", "sim", "surface", "cleanup", "preview", "preview.movie"}));
+  EXPECT_EQ(status["stages"]["preview"]["done"], kFakeLastFrame + 2) << output_;  // every frame and the movie
+  EXPECT_EQ(Count(status, "failed") + Count(status, "missing"), 0) << output_;
+  for (int f = 0; f <= kFakeLastFrame; ++f) EXPECT_TRUE(fs::exists(root_ / fmt::format("out/preview/frame.{:04}.png", f))) << f;
+  EXPECT_TRUE(fs::exists(root_ / "out/preview/preview.mp4"));
+}
+
+TEST_F(Farm, CancelLeavesNoJobAndNothingThatLooksFinished) {
+  if (!ClusterUp()) GTEST_SKIP() << cluster_problem_;
+  const std::string farm = "cleanup --farm-config " + (root_ / "site.toml").string();
+  setenv("FAKE_SIM_SLEEP", "2", 1);  // the simulation takes about 8 s
+  ASSERT_EQ(RunBake("fake.toml", root_ / "out", farm + " --farm slurm", true), 0) << output_;
+  unsetenv("FAKE_SIM_SLEEP");
+  std::set<std::string> ours;
+  for (const auto& s : summary_["submitted"]) ours.insert(s["job_id"].get<std::string>());
+  ASSERT_EQ(ours.size(), 4u) << output_;
+
+  // Cancel while the simulation runs and frame 1 exists (the surface task of frames 0-1 may be done).
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+  while (!fs::exists(root_ / "out/cache/sim/particles.0001.h5part") && std::chrono::steady_clock::now() < deadline)
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  ASSERT_TRUE(fs::exists(root_ / "out/cache/sim/particles.0001.h5part")) << testing::LocalSlurm::Capture("squeue 2>&1");
+  EXPECT_EQ(RunBake("fake.toml", root_ / "out", "cleanup", true), 5) << output_;  // a local bake refuses meanwhile
+  EXPECT_NE(output_.find("--farm cancel"), std::string::npos) << output_;
+  ASSERT_EQ(RunBake("fake.toml", root_ / "out", farm + " --farm cancel", true), 0) << output_;
+  EXPECT_FALSE(summary_["cancelled"].empty()) << output_;
+  const std::string queue = testing::LocalSlurm::Capture("squeue --noheader --format=%i 2>&1");
+  for (const auto& id : ours) EXPECT_EQ(queue.find(id), std::string::npos) << "job " << id << " is still in the queue:\n" << queue;
+
+  // Nothing the cancelled tasks left may pass as finished: the status shows nothing done after the
+  // simulation, and a local bake completes the bake to the same bytes as an uninterrupted one.
+  const json status = WaitForFarm("fake.toml", root_ / "out", true);
+  EXPECT_EQ(Count(status, "queued") + Count(status, "running"), 0) << output_;
+  const json* sim = StatusOf(status, "sim");
+  ASSERT_NE(sim, nullptr) << output_;
+  EXPECT_EQ((*sim)["state"], "failed") << output_;  // interrupted: its incomplete marker remains
+  EXPECT_LT(status["stages"]["surface"]["done"], kFakeLastFrame + 1) << output_;
+  ASSERT_EQ(RunBake("fake.toml", root_ / "out", "cleanup", true), 0) << output_;
+  EXPECT_EQ(summary_["stages"]["sim"]["ran"], 1) << output_;
+  EXPECT_NE(ReadFile(root_ / "out/cache/logs/sim.log").find("--resume"), std::string::npos) << "the cancelled simulation continues";
+  ASSERT_EQ(RunBake("fake.toml", root_ / "reference", "cleanup", true), 0) << output_;
+  EXPECT_TRUE(Outputs(root_ / "out") == Outputs(root_ / "reference"));
+}
+
+}  // namespace
+}  // namespace rime
