@@ -14,4 +14,7 @@ if [ ! -x "$BIN/rime-bake" ]; then
   exit 1
 fi
 # Output folder: out/<scene name> (examples/default.toml -> out/default).
-exec "$BIN/rime-bake" "$SCENE" "$@"
+# Per-frame stages (surfaces, cleanup, preview renders) run one frame per core unless -j is given.
+JOBS=(-j "$(nproc)")
+for a in "$@"; do case "$a" in -j|-j*|--jobs|--jobs=*) JOBS=() ;; esac; done
+exec "$BIN/rime-bake" "$SCENE" "${JOBS[@]}" "$@"

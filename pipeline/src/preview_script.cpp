@@ -78,14 +78,19 @@ for s in setup["solids"]:
         bpy.ops.mesh.primitive_cylinder_add(radius=s["radius"], depth=s["height"])
     elif shape == "plane":
         bpy.ops.mesh.primitive_plane_add(size=1.0)
-        bpy.context.object.scale = (s["size"][0], s["size"][1], 1.0)
     else:
         bpy.ops.mesh.primitive_cube_add(size=1.0)
-        bpy.context.object.scale = s["size"]
     if shape != "mesh":
         objects = [bpy.context.object]
+    # Extents go into the matrix itself: an object's .scale reaches matrix_world only after a
+    # depsgraph update, so a box set by .scale rendered as a 1 m cube.
+    size = Matrix.Identity(4)
+    if shape == "plane":
+        size = Matrix.Diagonal(Vector((s["size"][0], s["size"][1], 1.0, 1.0)))
+    elif shape == "box":
+        size = Matrix.Diagonal(Vector(list(s["size"]) + [1.0]))
     for o in objects:
-        o.matrix_world = transform_of(s["transform"]) @ o.matrix_world
+        o.matrix_world = transform_of(s["transform"]) @ o.matrix_world @ size
     assign(objects, SOLID)
 
 if os.path.exists(opts["--ice"]):  # frames without ice have no cleaned mesh
