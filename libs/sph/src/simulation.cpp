@@ -208,6 +208,9 @@ std::pair<double, std::string> ExplicitStepLimit(const io::Scene& scene, const M
 
 template <class T>
 void Simulation<T>::State::GatherFluid(const exec::Device& device, Index count) {
+  // The density is recomputed every step, but a frame written after particles froze or left must
+  // carry the solver's values of the water that stayed.
+  if (density.size() == x.size()) Reorder(device, density, tmp_scalar, order.data(), count);
   Reorder(device, x, tmp_vec, order.data(), count);
   Reorder(device, v, tmp_vec, order.data(), count);
   Reorder(device, pressure_previous, tmp_scalar, order.data(), count);

@@ -82,6 +82,32 @@ TEST(Freezing, InvariantsAlongARun) {
   std::printf("invariants: %zu ice, %lld water after 8 frames\n", previous.ice.size(), (long long)previous.water);
 }
 
+// A frame written right after water froze carries the solver's densities of the water that stayed,
+// not placeholders: the compaction that removes the new ice keeps the density array in step.
+TEST(Freezing, FrameAfterFreezingStoresTheSolversDensity) {
+  auto sim = Make(DropScene(0.05, 0.01));
+  bool froze_this_step = false;
+  for (int step = 0; step < 5000 && !froze_this_step; ++step) {
+    const std::int64_t ice_before = sim->ice_count();
+    sim->Step(sim->NextTimeStep(1.0));
+    froze_this_step = sim->ice_count() > ice_before && sim->fluid_count() > 0;
+  }
+  ASSERT_TRUE(froze_this_step) << "no step froze water: the scene does not exercise the conversion";
+  const io::ParticleFrame f = sim->Snapshot(0);
+  const auto& phase = f.Get<std::uint8_t>("phase");
+  const auto& density = f.Get<float>("density");
+  float lowest = 1e30f, highest = 0;
+  for (std::size_t i = 0; i < phase.size(); ++i) {
+    if (phase[i] != 0) continue;
+    ASSERT_TRUE(std::isfinite(density[i]) && density[i] > 0) << density[i];
+    lowest = std::min(lowest, density[i]), highest = std::max(highest, density[i]);
+  }
+  // Water at its free surface has fewer neighbours, so the solver's density there is below ρ0; a
+  // frame filled with ρ0 for every particle would give lowest == highest == 1000.
+  EXPECT_LT(lowest, 990.0f);
+  EXPECT_LT(lowest, highest);
+}
+
 TEST(Freezing, IdenticalAcrossThreadCounts) {
   std::map<std::int64_t, Vec3f> ice[2];
   for (int threads : {1, 2}) {
