@@ -19,6 +19,7 @@
 #include "rime/core/error.h"
 #include "rime/io/particles.h"
 #include "rime/io/scene.h"
+#include "small_bake_scene.h"
 
 namespace fs = std::filesystem;
 extern char** environ;
@@ -26,43 +27,8 @@ extern char** environ;
 namespace rime {
 namespace {
 
-// About 1 700 water particles falling onto a sphere above the ground; 0.5 s at 20 fps = frames 0..10.
 constexpr int kLastFrame = 10;
-const char* kScene = R"([scene]
-name = "e2e"
-fps = 20
-end_time = 0.5
-
-[water]
-spacing = 0.025
-
-[simulation]
-modules = ["gravity", "viscosity", "surface_tension", "freezing"]
-
-[domain]
-min = [-0.5, -0.5, -0.05]
-max = [0.5, 0.5, 0.8]
-
-[[solid]]
-name = "ground"
-shape = "plane"
-size = [1.0, 1.0, 1.0]
-
-[[solid]]
-name = "ball"
-shape = "sphere"
-radius = 0.12
-translate = [0.0, 0.0, 0.2]
-
-[[water_block]]
-min = [-0.15, -0.15, 0.4]
-max = [0.15, 0.15, 0.55]
-
-# The water surface: it exists from frame 0, so every stage has real work on every frame (ice only
-# appears once water has frozen; frames without ice have nothing to clean).
-[surface]
-phase = "water"
-)";
+const std::string kScene = test::SmallBakeScene("e2e", kLastFrame);
 
 std::string ReadFile(const fs::path& p) {
   std::ifstream in(p, std::ios::binary);

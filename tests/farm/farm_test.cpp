@@ -20,6 +20,7 @@
 
 #include "fake_tools.h"
 #include "local_slurm.h"
+#include "small_bake_scene.h"
 
 namespace fs = std::filesystem;
 using nlohmann::json;
@@ -27,40 +28,7 @@ using nlohmann::json;
 namespace rime {
 namespace {
 
-// About 1 700 water particles falling onto a sphere; 0.25 s at 20 fps = frames 0..5.
-const char* kRealScene = R"([scene]
-name = "farm"
-fps = 20
-end_time = 0.25
-
-[water]
-spacing = 0.025
-
-[simulation]
-modules = ["gravity", "viscosity", "surface_tension", "freezing"]
-
-[domain]
-min = [-0.5, -0.5, -0.05]
-max = [0.5, 0.5, 0.8]
-
-[[solid]]
-name = "ground"
-shape = "plane"
-size = [1.0, 1.0, 1.0]
-
-[[solid]]
-name = "ball"
-shape = "sphere"
-radius = 0.12
-translate = [0.0, 0.0, 0.2]
-
-[[water_block]]
-min = [-0.15, -0.15, 0.4]
-max = [0.15, 0.15, 0.55]
-
-[surface]
-phase = "water"
-)";
+const std::string kRealScene = test::SmallBakeScene("farm", 5);
 
 // For the fake stage tools (pipeline/tests/fake_tools.h): frames 0..3.
 constexpr int kFakeLastFrame = 3;

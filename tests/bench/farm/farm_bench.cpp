@@ -21,49 +21,15 @@
 
 #include "local_slurm.h"
 
+#include "small_bake_scene.h"
+
 namespace fs = std::filesystem;
 using nlohmann::json;
 using Clock = std::chrono::steady_clock;
 
 namespace {
 
-// About 1 700 water particles falling onto a sphere (the farm test's scene, longer).
-std::string Scene(int frames) {
-  return fmt::format(R"([scene]
-name = "farm_bench"
-fps = 20
-end_time = {:.3f}
-
-[water]
-spacing = 0.025
-
-[simulation]
-modules = ["gravity", "viscosity", "surface_tension", "freezing"]
-
-[domain]
-min = [-0.5, -0.5, -0.05]
-max = [0.5, 0.5, 0.8]
-
-[[solid]]
-name = "ground"
-shape = "plane"
-size = [1.0, 1.0, 1.0]
-
-[[solid]]
-name = "ball"
-shape = "sphere"
-radius = 0.12
-translate = [0.0, 0.0, 0.2]
-
-[[water_block]]
-min = [-0.15, -0.15, 0.4]
-max = [0.15, 0.15, 0.55]
-
-[surface]
-phase = "water"
-)",
-                     (frames - 1) / 20.0 + 0.001);
-}
+std::string Scene(int frames) { return rime::test::SmallBakeScene("farm_bench", frames - 1); }
 
 std::string ReadFile(const fs::path& p) {
   std::ifstream in(p, std::ios::binary);
