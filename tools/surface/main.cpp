@@ -154,7 +154,7 @@ int main(int argc, char** argv) {
   app.add_option("--close", o.close,
                  "Closing radius in particle spacings: dilates, then erodes the level set, filling gaps narrower than twice it (default 0.5)")
       ->check(CLI::Range(0.0, 4.0));
-  app.add_option("--smooth", o.smooth, "OpenVDB level-set mean-curvature smoothing iterations after the closing (default 10)")
+  app.add_option("--smooth", o.smooth, "OpenVDB level-set mean-curvature smoothing iterations after the closing, for the ellipsoids and isotropic fields (default 10)")
       ->check(CLI::Range(0, 100));
   app.add_flag("--vel", o.velocity, "Add a `vel` vec3 grid (particle velocities, for motion blur) to the VDB");
   app.add_flag("--density", o.density, "Add a `density` fog grid (Blender's volume shader shows it without setup)");
