@@ -1,4 +1,4 @@
-// Stability at the extremes (issue 10): every case ends either in a stable result (finite state,
+// Stability at the extremes: every case ends either in a stable result (finite state,
 // bounded density error, no particle through a wall) or in a clear refusal (rime::Error of the
 // documented kind, naming the cause). The empty scene, a single particle and coincident particles
 // are covered in tests/validation/free_fall_test.cpp.

@@ -1,4 +1,4 @@
-// Validation against analytic motion, and first stability extremes (issue 10, partial).
+// Validation against analytic motion, and first stability extremes.
 #include <gtest/gtest.h>
 
 #include <cmath>

@@ -1,5 +1,5 @@
 // Hydrostatic column: a 0.5 m water column at rest in a box, layer-averaged pressure against
-// ρ0 g depth, and the least-squares slope dp/dz against −ρ0 g (spec T13 and issue 10).
+// ρ0 g depth, and the least-squares slope dp/dz against −ρ0 g (spec T13).
 //
 // The free surface is taken from the water's volume: N particles fill N d_p³, the Akinci walls
 // act 0.6 d_p in front of their particles (rest density is reached 1.1 d_p from a wall, spec §3),

@@ -1,4 +1,4 @@
-// Surface sampling (spec §3, issue 3 acceptance): spacing bounds, coverage, no duplicates, normals,
+// Surface sampling (spec §3): spacing bounds, coverage, no duplicates, normals,
 // degenerate and badly shaped input, bad input.
 #include <gtest/gtest.h>
 

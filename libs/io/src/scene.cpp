@@ -113,7 +113,7 @@ void ApplyQualityPreset(const std::string& quality, Scene& scene) {
   }
 }
 
-// The Im et al. 2013 baseline (issue 10): isotropic ice growth, Akinci 2013 surface tension
+// The Im et al. 2013 baseline: isotropic ice growth, Akinci 2013 surface tension
 // instead of He 2014, no wall stickiness. Like the quality presets, explicit values still win.
 void ApplyMethodPreset(const std::string& method, Scene& scene) {
   if (method != "im2013") return;

@@ -123,7 +123,7 @@ TEST(Iisph, BlockAtRestStaysAtRest) {
 // lattice for 30 s, then watched for 1 s, at the default settings. Max speed over that second
 // 0.31 mm/s (0.28-0.68 mm/s when the start is perturbed by 1e-4 to 3e-2 d_p; 0.53, 1.6 and
 // 3.8 mm/s after 25, 20 and 10 s of settling: the lattice's disorder takes that long). With
-// Ihmsen's minimum of 2 pressure iterations (the default before session 6) the block breathes
+// Ihmsen's minimum of 2 pressure iterations the block breathes
 // instead, the whole of it in phase, at 2.6 mm/s for as long as it runs (checked to 40 s): the solve
 // stops after 2 iterations in most steps, and a block that sinks as a whole compresses only its
 // floor layer, which the average error hardly sees. η 1e-4 also stops it (0.76 mm/s, 11 iterations
@@ -156,7 +156,7 @@ TEST(Iisph, SettledBlockStaysAtRest) {
 // at-rest speed bound holds here (0.3-6.8 mm/s at 35-60 s). What must hold is that the bursts are
 // the packing releasing potential energy, not the solver feeding it: the mechanical energy falls
 // in every second (by 6-4061 µJ over 30 s), and no particle leaves or overlaps the lid. A warm
-// start of 0.95 (unstable on the settled block, session 6) fails this: the energy rose between 7
+// start of 0.95 (unstable on the settled block) fails this: the energy rose between 7
 // and 8 s.
 TEST(Iisph, SealedFullTankOnlyLosesEnergy) {
   io::Scene scene = test::ColumnScene(0.02, 8, 8, 8, 0);

@@ -1,4 +1,4 @@
-// Reconstruction acceptance tests (issue 7; spec §10, T26–T27): radius and closedness of a ball,
+// Reconstruction acceptance tests (spec §10, T26–T27): radius and closedness of a ball,
 // thin sheets, separated clusters, level-set validity and the VDB file contract.
 #include <gtest/gtest.h>
 #include <openvdb/tools/VolumeToMesh.h>

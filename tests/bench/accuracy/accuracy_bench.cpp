@@ -1,4 +1,4 @@
-// Speed/accuracy study (issue 10): a small quasi-2D dam break (column a wide, 2a high, a few
+// Speed/accuracy study: a small quasi-2D dam break (column a wide, 2a high, a few
 // particles across the channel depth) swept over the knobs users turn, one at a time around the
 // production defaults, plus the quality presets. Every setting records cost (wall and CPU time,
 // steps, pressure iterations, peak RSS) and error (density error, volume drift, surge-front

@@ -1,4 +1,4 @@
-// Boundary sampling throughput (issue 3): particles per second for the Stanford bunny scaled to
+// Boundary sampling throughput: particles per second for the Stanford bunny scaled to
 // 0.5 m and for a 1-million-triangle torus, volumes included. Prints a table and writes JSON.
 //
 //   rime_bench_boundary [--repeats N] [--threads N] [--json FILE] [--mesh-dir DIR] [--case TEXT]

@@ -1,6 +1,6 @@
 // Benchmark of the default rime-clean chain on noisy balls and tori meshed by surface nets (the
 // triangle shapes of marching-cubes output), 100k / 500k / 2M triangles. Prints a table (medians
-// of --runs) and writes JSON. Target (issue 8): >= 100k input triangles per second per core.
+// of --runs) and writes JSON. Target: >= 100k input triangles per second per core.
 #include <CLI/CLI.hpp>
 #include <fmt/format.h>
 
