@@ -1,6 +1,7 @@
 // Rime against the Im et al. 2013 baseline it improves on. Two procedural scenes, each run twice
 // with the same setup, once with `[scene] method = "rime"` (anisotropic growth, He 2014 surface
-// tension, wall stickiness) and once with `method = "im2013"` (isotropic growth, Akinci 2013 surface tension, no wall stickiness):
+// tension, wall stickiness) and once with `method = "im2013"` (isotropic growth, Akinci 2013
+// surface tension, no wall stickiness):
 //   drop:  a sphere of water dropped onto a solid sphere standing above a ground plane;
 //   throw: a block of water thrown sideways at the same sphere.
 // Measures (definitions in RESULTS.md and below): ice count; specks (ice not connected to a solid
