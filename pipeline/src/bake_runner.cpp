@@ -29,13 +29,6 @@ using Clock = std::chrono::steady_clock;
 namespace rime::bake {
 namespace {
 
-std::string ReadSmallFile(const fs::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  std::stringstream text;
-  text << in.rdbuf();
-  return text.str();
-}
-
 std::string DescribeComponent(const std::string& component) {
   if (component == "tool") return "the tool binary";
   if (component == "command") return "the command line";
@@ -145,7 +138,7 @@ struct Runner::Impl {
     if (job.resumable) {
       // Resume only a run of the same key that was cut off; anything else restarts from scratch so
       // frames computed with other parameters cannot survive.
-      const bool same_run_interrupted = fs::exists(marker) && ReadSmallFile(marker) == verdict.fresh.key;
+      const bool same_run_interrupted = fs::exists(marker) && ReadFileOrEmpty(marker) == verdict.fresh.key;
       if (same_run_interrupted && !job.outputs.empty() && fs::exists(job.outputs.front())) {
         args.push_back("--resume");
         log::Info("{}: continuing the interrupted run from its last complete frame (--resume)", job.id);

@@ -66,13 +66,6 @@ std::string Ranges(std::vector<std::int64_t> values) {
   return out;
 }
 
-std::string ReadText(const fs::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  std::stringstream text;
-  text << in.rdbuf();
-  return text.str();
-}
-
 // ---- Slurm's client commands -------------------------------------------------------------------
 
 fs::path SlurmCommand(const std::string& name) {
@@ -648,7 +641,7 @@ int FarmTask(const FarmContext& farm, const std::string& group, int chunk, const
       const auto sim = std::find_if(jobs.begin(), jobs.end(), [](const Job& j) { return j.id == "sim"; });
       if (sim_key.empty()) sim_key = Runner(*farm.doc, layout, jobs, RunOptions{}).Evaluate(*sim).fresh.key;
       const fs::path& frame = job->inputs.front();
-      const auto marker_key = [&] { return fs::exists(sim_marker) ? ReadText(sim_marker) : std::string(); };
+      const auto marker_key = [&] { return fs::exists(sim_marker) ? ReadFileOrEmpty(sim_marker) : std::string(); };
       int failed_queries = 0;
       bool announced = false;
       while (!(fs::exists(frame) && marker_key() == sim_key)) {

@@ -27,28 +27,8 @@ extern char** environ;
 namespace rime::bake {
 namespace {
 
-constexpr int kLastFrame = 3;  // fps 2 x end_time 1.5 s: frames 0..3
-
-const char* kScene = R"([scene]
-fps = 2
-end_time = 1.5
-
-[water]
-spacing = 0.05
-
-[simulation]
-modules = ["gravity"]
-omega = 0.5
-
-[[solid]]
-name = "ground"
-shape = "plane"
-size = [1.0, 1.0, 1.0]
-
-[[water_block]]
-min = [0.0, 0.0, 0.1]
-max = [0.2, 0.2, 0.3]
-)";
+constexpr int kLastFrame = testing::kFakeLastFrame;
+const char* const kScene = testing::kFakeScene;
 
 std::string ReadFile(const fs::path& p) {
   std::ifstream in(p, std::ios::binary);

@@ -13,6 +13,30 @@
 
 namespace rime::bake::testing {
 
+/// A scene for the fake tools: frames 0..kFakeLastFrame (fps 2 x end_time 1.5 s). The fake
+/// simulation ignores omega, which tests edit to change the [simulation] section.
+constexpr int kFakeLastFrame = 3;
+constexpr const char* kFakeScene = R"([scene]
+fps = 2
+end_time = 1.5
+
+[water]
+spacing = 0.05
+
+[simulation]
+modules = ["gravity"]
+omega = 0.5
+
+[[solid]]
+name = "ground"
+shape = "plane"
+size = [1.0, 1.0, 1.0]
+
+[[water_block]]
+min = [0.0, 0.0, 0.1]
+max = [0.2, 0.2, 0.3]
+)";
+
 // FAKE_FAIL=<stage>:<frame> makes that stage fail on that frame; FAKE_SIM_SLEEP slows each frame.
 constexpr const char* kPreamble = R"SH(#!/bin/bash
 set -e

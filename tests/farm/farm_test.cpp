@@ -30,27 +30,8 @@ namespace {
 
 const std::string kRealScene = test::SmallBakeScene("farm", 5);
 
-// For the fake stage tools (pipeline/tests/fake_tools.h): frames 0..3.
-constexpr int kFakeLastFrame = 3;
-const char* kFakeScene = R"([scene]
-fps = 2
-end_time = 1.5
-
-[water]
-spacing = 0.05
-
-[simulation]
-modules = ["gravity"]
-
-[[solid]]
-name = "ground"
-shape = "plane"
-size = [1.0, 1.0, 1.0]
-
-[[water_block]]
-min = [0.0, 0.0, 0.1]
-max = [0.2, 0.2, 0.3]
-)";
+using bake::testing::kFakeLastFrame;
+using bake::testing::kFakeScene;
 
 constexpr auto kFarmTimeout = std::chrono::seconds(150);
 

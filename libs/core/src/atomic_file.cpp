@@ -7,6 +7,7 @@
 #include <cerrno>
 #include <cstring>
 #include <fstream>
+#include <sstream>
 
 #include "rime/core/error.h"
 
@@ -53,6 +54,13 @@ void WriteFileAtomically(const std::filesystem::path& path, const std::string& c
     if (!out) throw IoError("cannot write file (disk full?)", path.string());
   }
   file.Commit();
+}
+
+std::string ReadFileOrEmpty(const std::filesystem::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::stringstream text;
+  text << in.rdbuf();
+  return text.str();
 }
 
 }  // namespace rime

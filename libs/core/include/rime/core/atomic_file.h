@@ -30,4 +30,7 @@ class AtomicFile {
 /// Writes a whole text file atomically.
 void WriteFileAtomically(const std::filesystem::path& path, const std::string& contents);
 
+/// The whole contents of a file; empty when it is missing or unreadable (callers treat both alike).
+std::string ReadFileOrEmpty(const std::filesystem::path& path);
+
 }  // namespace rime
