@@ -143,8 +143,10 @@ TEST(FreezeKernels, FreezingFractionAndEnergy) {
   DeviceArray<double> es(cpu, 1), ei(cpu, 1);
   for (const auto& films : {std::vector<double>{0, 0, 0}, std::vector<double>{0, 1, 0}, std::vector<double>{1, 1, 1}}) {
     DeviceArray<double> film(cpu, films);
-    kernels::PhaseDecision<double>{off.data(), ind.data(), fx.data(), dd.data(), bx.data(), phase.data(), film.data(), growth.data(), valid.data(),
-                                   CubicSpline<double>(kH), p, decision.data(), trigger.data(), es.data(), ei.data()}(0);
+    kernels::PhaseDecision<double>{.fb_offsets = off.data(), .fb_index = ind.data(), .x = fx.data(), .d = dd.data(), .boundary_x = bx.data(),
+                                   .boundary_phase = phase.data(), .film = film.data(), .growth = growth.data(), .growth_valid = valid.data(),
+                                   .kernel = CubicSpline<double>(kH), .params = p,
+                                   .decision = decision.data(), .trigger = trigger.data(), .energy_solid = es.data(), .energy_ice = ei.data()}(0);
     if (films[0] == 0 && films[2] == 0) {
       EXPECT_EQ(es.ToHost()[0], 0.0) << "no film or out of support: no energy";
       EXPECT_EQ(ei.ToHost()[0], 0.0);
@@ -156,6 +158,27 @@ TEST(FreezeKernels, FreezingFractionAndEnergy) {
       EXPECT_EQ(trigger.ToHost()[0], 0u);
     }
   }
+}
+
+// The nucleation delay holds a candidate back until its clock reaches the delay, and a step below
+// the thresholds restarts the clock.
+TEST(FreezeKernels, NucleationDelayCountsUninterruptedTime) {
+  exec::Device cpu = exec::Device::Cpu();
+  DeviceArray<std::uint32_t> decision(cpu, 1);
+  DeviceArray<double> clock(cpu, 1);
+  const kernels::NucleationDelay<double> delay{.dt = 0.01, .delay = 0.03, .decision = decision.data(), .contact_time = clock.data()};
+  auto step = [&](std::uint32_t candidate) {
+    decision.assign(std::vector<std::uint32_t>{candidate});
+    delay(0);
+    return decision.ToHost()[0];
+  };
+  EXPECT_EQ(step(kGlaze), kNotIce);
+  EXPECT_EQ(step(kGlaze), kNotIce);
+  EXPECT_EQ(step(kNotIce), kNotIce);
+  EXPECT_EQ(clock.ToHost()[0], 0.0) << "a step below the thresholds restarts the clock";
+  EXPECT_EQ(step(kIcicle), kNotIce);
+  EXPECT_EQ(step(kIcicle), kNotIce);
+  EXPECT_EQ(step(kIcicle), kIcicle) << "three uninterrupted steps of 0.01 s reach the 0.03 s delay";
 }
 
 }  // namespace

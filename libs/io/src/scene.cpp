@@ -237,6 +237,7 @@ Scene ParseScene(const std::string& text, const fs::path& file) {
     f.dt_ref = t.Number("dt_ref", f.dt_ref, Range::Positive());
     f.film_diffusion = t.Number("film_diffusion", f.film_diffusion, Range::NonNegative());
     f.drying_rate = t.Number("drying_rate", f.drying_rate, Range::NonNegative());
+    f.freeze_delay = t.Number("freeze_delay", f.freeze_delay, Range::Closed(0, 60));
     f.growth_sign = static_cast<int>(t.Integer("growth_sign", f.growth_sign, Range::Closed(-1, 1)));
     if (f.growth_sign == 0) t.Fail("growth_sign", "growth_sign must be +1 or -1");
     f.fr_mode = t.String("fr_mode", f.fr_mode, {"map", "clamp"});

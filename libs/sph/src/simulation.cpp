@@ -35,7 +35,7 @@ struct Simulation<T>::State {
         fluid_grid(d), boundary_grid(d), ff(d), fb(d), ff_w(d), fb_w(d), ff_grad(d), fb_grad(d), motions(d), keep(d),
         slot(d), order(d), film(d), growth(d), growth_valid(d), ice_kind(d), ice_time(d), ice_d(d), fluid_d(d), fluid_flag(d),
         boundary_active(d), active_list(d), decision(d), trigger(d), frozen(d), wet(d), region(d), region_list(d), energy_solid(d),
-        energy_ice(d), laplacian(d), lambda(d), active_x(d), bf(d) {}
+        energy_ice(d), laplacian(d), lambda(d), active_x(d), bf(d), contact_time(d) {}
 
   // Fluid state (persistent across steps, reordered with the particles).
   DeviceArray<Vec3<T>> x, v;
@@ -81,6 +81,9 @@ struct Simulation<T>::State {
   DeviceArray<Vec3<T>> active_x;
   neighbors::NeighborList bf;
   std::int64_t ice_count = 0;
+  // Nucleation delay (freezing.freeze_delay > 0 only): fluid, seconds above a freezing threshold.
+  bool nucleation_delay = false;
+  DeviceArray<T> contact_time;
 
   /// Keeps the water particles order[0..count) in that order: every persistent per-water attribute
   /// (the state a checkpoint carries) is listed here and only here.
@@ -215,6 +218,7 @@ void Simulation<T>::State::GatherFluid(const exec::Device& device, Index count) 
   Reorder(device, v, tmp_vec, order.data(), count);
   Reorder(device, pressure_previous, tmp_scalar, order.data(), count);
   Reorder(device, id, tmp_id, order.data(), count);
+  if (nucleation_delay) Reorder(device, contact_time, tmp_scalar, order.data(), count);
 }
 
 template <class T>
@@ -482,6 +486,11 @@ void Simulation<T>::Initialize() {
     s.ice_time.SetZero();
     s.ice_d.resize(s.nb());
     s.ice_d.SetZero();
+    s.nucleation_delay = scene_.freezing.freeze_delay > 0;
+    if (s.nucleation_delay) {
+      s.contact_time.resize(s.n());
+      s.contact_time.SetZero();
+    }
   }
   initialized_ = true;
 }
@@ -559,6 +568,8 @@ void Simulation<T>::Freeze(double dt) {
                     fk::PhaseDecision<T>{s.fb.offsets.data(), s.fb.indices.data(), s.x.data(), s.fluid_d.data(), s.bx.data(), s.bphase.data(),
                                          s.film.data(), s.growth.data(), s.growth_valid.data(), kernel, p, s.decision.data(), s.trigger.data(),
                                          s.energy_solid.data(), s.energy_ice.data()});
+  if (s.nucleation_delay)
+    exec::ParallelFor(device_, n, fk::NucleationDelay<T>{T(dt), T(scene_.freezing.freeze_delay), s.decision.data(), s.contact_time.data()});
   exec::ParallelFor(device_, n, fk::KeepUnfrozen{s.decision.data(), s.keep.data(), s.frozen.data()});
   DeviceArray<std::uint32_t> frozen_list(device_);
   const Index frozen = ListFlagged(device_, s.frozen, n, s.slot, frozen_list);
@@ -888,6 +899,7 @@ void Simulation<T>::Emit(double dt, StepStats& stats) {
   s.v.resize(n + m);
   s.id.resize(n + m);
   s.pressure_previous.resize(n + m);  // new particles start with p = 0
+  if (s.nucleation_delay) s.contact_time.resize(n + m);
   exec::CopyToDevice(device_, s.x.data() + n, new_x.data(), m * sizeof(Vec3<T>));
   exec::CopyToDevice(device_, s.v.data() + n, new_v.data(), m * sizeof(Vec3<T>));
   exec::CopyToDevice(device_, s.id.data() + n, ids.data(), m * sizeof(std::int64_t));
@@ -996,7 +1008,7 @@ std::size_t Simulation<T>::MemoryBytes() const {
   std::size_t bytes = 0;
   for (const auto* a : {&s.x, &s.v, &s.v_adv, &s.accel, &s.d_ii, &s.s, &s.bx, &s.bv, &s.blocal, &s.ff_grad, &s.fb_grad, &s.tmp_vec, &s.surface_normal}) bytes += a->bytes();
   for (const auto* a : {&s.density, &s.density_error, &s.pressure, &s.pressure_next, &s.pressure_previous, &s.advected_error, &s.a_ii,
-                        &s.compression, &s.scratch, &s.color, &s.energy, &s.bpsi, &s.bvol, &s.ff_w, &s.fb_w, &s.tmp_scalar})
+                        &s.compression, &s.scratch, &s.color, &s.energy, &s.bpsi, &s.bvol, &s.ff_w, &s.fb_w, &s.tmp_scalar, &s.contact_time})
     bytes += a->bytes();
   bytes += s.ff.offsets.bytes() + s.ff.indices.bytes() + s.fb.offsets.bytes() + s.fb.indices.bytes();
   return bytes;
@@ -1024,6 +1036,10 @@ void Simulation<T>::SetFluidState(const std::vector<Vec3<T>>& x, const std::vect
     s.id.assign(ids);
     s.pressure_previous.resize(x.size());
     s.pressure_previous.SetZero();
+    if (s.nucleation_delay) {
+      s.contact_time.resize(x.size());
+      s.contact_time.SetZero();
+    }
   }
   initialized_ = true;
 }
@@ -1102,6 +1118,11 @@ io::ParticleFrame Simulation<T>::Snapshot(std::int64_t frame_number) const {
     f.SetVec3("growth_dir", growth_dir);
     f.SetVec3("local", local_all);
     for (int c = 0; c < 6; ++c) f.Set(fmt::format("anisotropy_{}", c), std::move(aniso[c]));
+    if (s.nucleation_delay) {
+      std::vector<T> contact = s.contact_time.ToHost();
+      contact.resize(nf + nb, T(0));
+      f.Set("contact_time", std::move(contact));
+    }
   }
   f.SetPositions(x);
   std::vector<T> vx(v.size()), vy(v.size()), vz(v.size());
@@ -1146,7 +1167,8 @@ void Simulation<T>::Restore(const io::ParticleFrame& f) {
   const auto& density = f.Get<T>("density");
   std::vector<Vec3<T>> fx, fv;
   std::vector<std::int64_t> fid;
-  std::vector<T> fp, fd;
+  const std::vector<T>* contact = s.nucleation_delay ? &f.Get<T>("contact_time") : nullptr;
+  std::vector<T> fp, fd, fc;
   for (std::size_t i = 0; i < x.size(); ++i) {
     if (phase[i] != static_cast<std::uint8_t>(io::Phase::kFluid)) continue;
     fx.push_back(x[i]);
@@ -1154,12 +1176,14 @@ void Simulation<T>::Restore(const io::ParticleFrame& f) {
     fid.push_back(id[i]);
     fp.push_back(pressure[i]);
     fd.push_back(density[i]);
+    if (contact) fc.push_back((*contact)[i]);
   }
   s.x.assign(fx);
   s.v.assign(fv);
   s.id.assign(fid);
   s.pressure_previous.assign(fp);
   s.density.assign(fd);
+  if (contact) s.contact_time.assign(fc);
   if (modules_.Enabled("freezing")) {
     // Solids keep their order (Initialize reorders them the same way); ice is appended in order.
     const auto& film = f.Get<T>("water_film");

@@ -311,5 +311,56 @@ TEST(Freezing, SlowWaterTouchingAWallFreezesInAThinLayer) {
   EXPECT_LT(p90, 1.5 * kDp) << "the glaze layer must be thin";
 }
 
+// freeze_delay: water freezes only after its energy stayed above a threshold that long: the first
+// ice comes `delay` after the prompt run's, and less of it has frozen at the same moment.
+TEST(Freezing, NucleationDelayHoldsBackFreezing) {
+  const double delay = 0.1, end = 0.4;
+  io::Scene scene = DropScene(0.01, 0.002, {0.3, 0, 0});
+  scene.fluid_blocks[0].min.z = 1.1 * kDp, scene.fluid_blocks[0].max.z = 5.1 * kDp;
+  auto run = [&](double freeze_delay, std::int64_t& ice_at_end) {
+    scene.freezing.freeze_delay = freeze_delay;
+    auto sim = Make(scene);
+    double first = -1;
+    while (sim->time() < end - 1e-9) {
+      sim->Step(sim->NextTimeStep(end));
+      if (first < 0 && sim->ice_count() > 0) first = sim->time();
+    }
+    ice_at_end = sim->ice_count();
+    return first;
+  };
+  std::int64_t prompt_ice = 0, delayed_ice = 0;
+  const double prompt_first = run(0, prompt_ice), delayed_first = run(delay, delayed_ice);
+  std::printf("first ice at %.3f s without delay, %.3f s with %.2f s; at %.2f s: %lld and %lld ice\n", prompt_first, delayed_first, delay,
+              end, (long long)prompt_ice, (long long)delayed_ice);
+  ASSERT_GE(prompt_first, 0.0) << "the scene does not freeze at all";
+  ASSERT_GE(delayed_first, 0.0) << "the delayed run never froze";
+  // Both runs are the same until the first freezing; the first energy above a threshold is the
+  // prompt run's first ice, and the delayed clock needs `delay` from that step (steps <= 10 ms).
+  EXPECT_GE(delayed_first, prompt_first + delay - 0.01) << "water froze before its clock reached freeze_delay";
+  EXPECT_LT(delayed_ice, prompt_ice);
+}
+
+// The contact clocks are part of the checkpoint: a delayed run resumed from a frame freezes the
+// same particles at the same places as the run that went straight on.
+TEST(Freezing, ResumeWithNucleationDelayIsBitIdentical) {
+  io::Scene scene = DropScene(0.05, 0.01);
+  scene.freezing.freeze_delay = 0.05;
+  auto straight = Make(scene);
+  while (straight->time() < 0.15 - 1e-9) straight->Step(straight->NextTimeStep(0.15));
+  const io::ParticleFrame checkpoint = straight->Snapshot(1);
+  ASSERT_TRUE(checkpoint.attributes.count("contact_time"));
+  const auto& contact = checkpoint.Get<float>("contact_time");
+  ASSERT_GT(*std::max_element(contact.begin(), contact.end()), 0.0f) << "no water is waiting to freeze at the checkpoint";
+  while (straight->time() < 0.3 - 1e-9) straight->Step(straight->NextTimeStep(0.3));
+
+  Simulation<float> resumed(scene, exec::Device::Cpu());
+  resumed.AddBoundaryObject(test::BoxBoundary(kDp, 0.72, 0.72, 0.2), "box");
+  resumed.Restore(checkpoint);
+  while (resumed.time() < 0.3 - 1e-9) resumed.Step(resumed.NextTimeStep(0.3));
+  EXPECT_GT(straight->ice_count(), checkpoint.numbers.at("ice_particles")) << "nothing froze after the checkpoint";
+  EXPECT_EQ(Observe(resumed).ice, Observe(*straight).ice);
+  EXPECT_EQ(resumed.Positions(), straight->Positions());
+}
+
 }  // namespace
 }  // namespace rime::sph

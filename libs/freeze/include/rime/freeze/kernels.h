@@ -279,6 +279,23 @@ struct PhaseDecision {
   }
 };
 
+/// Nucleation delay: a candidate keeps its decision only once its energy has stayed above a
+/// threshold for `delay` seconds in a row; a step below the thresholds resets its clock.
+template <class T>
+struct NucleationDelay {
+  T dt, delay;
+  std::uint32_t* decision;  // IceKind, from PhaseDecision
+  T* contact_time;          // s above a threshold, per fluid particle
+  RIME_HD void operator()(Index j) const {
+    if (decision[j] == kNotIce) {
+      contact_time[j] = T(0);
+      return;
+    }
+    contact_time[j] += dt;
+    if (contact_time[j] < delay) decision[j] = kNotIce;
+  }
+};
+
 /// keep[j] = 1 unless j freezes this step.
 struct KeepUnfrozen {
   const std::uint32_t* decision;
@@ -297,7 +314,8 @@ struct KeepUnfrozen {
   X(rime::freeze::kernels::MarkContacts<T>) X(rime::freeze::kernels::FluidAnisotropy<T>)                               \
   X(rime::freeze::kernels::FilmAndGrowth<T>) X(rime::freeze::kernels::MarkWet<T>) X(rime::freeze::kernels::DilateWet<T>) \
   X(rime::freeze::kernels::FilmLaplacian<T>) X(rime::freeze::kernels::ApplyFilmDiffusion<T>)                           \
-  X(rime::freeze::kernels::DryFilm<T>) X(rime::freeze::kernels::PhaseDecision<T>)
+  X(rime::freeze::kernels::DryFilm<T>) X(rime::freeze::kernels::PhaseDecision<T>)                                     \
+  X(rime::freeze::kernels::NucleationDelay<T>)
 
 #define RIME_FREEZE_KERNELS(X)                                                                                   \
   RIME_FREEZE_KERNELS_T(X, float) RIME_FREEZE_KERNELS_T(X, double) X(rime::freeze::kernels::MarkFluidFromBoundary) \

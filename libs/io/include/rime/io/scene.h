@@ -81,6 +81,9 @@ struct FreezingSettings {
   double dt_ref = 0.006;              // s
   double film_diffusion = 0.15;       // D_Gamma in d_p^2 / dt_ref
   double drying_rate = 0;             // k_dry, 1/s
+  // Water freezes only after its nucleation energy stayed above a threshold this long; 0 freezes at
+  // once, as the paper does (docs/physics.md "Nucleation delay").
+  double freeze_delay = 0;            // s
   // Ice grows downstream, with the flow (−1), and not where fr < 0 ("clamp"): the paper's pictures
   // and text (docs/physics.md "Freezing fraction"); +1 grows against the flow, a column into falling water.
   int growth_sign = -1;               // −1: with the flow, +1: against it (Eq. 31 as printed)
