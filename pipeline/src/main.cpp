@@ -181,7 +181,10 @@ int main(int argc, char** argv) {
           {"ran", st.ran}, {"empty", st.empty}, {"cached", st.cached}, {"failed", st.failed}, {"not_run", st.not_run}, {"seconds", st.seconds}};
     }
     tool::WriteSummary(common, summary);
-    if (result.exit_code == kExitOnlyRefused || result.exit_code == static_cast<int>(ExitCode::kIo)) throw Error(static_cast<ExitCode>(result.exit_code), result.failure);
+    int jobs_seen = 0;  // none when the bake was refused before running anything (--only, the lock)
+    for (const auto& st : result.stages) jobs_seen += st.ran + st.cached + st.failed + st.not_run;
+    if (result.exit_code == kExitOnlyRefused || (result.exit_code == static_cast<int>(ExitCode::kIo) && jobs_seen == 0))
+      throw Error(static_cast<ExitCode>(result.exit_code), result.failure);
     if (!common.quiet) {
       if (dry_run) {
         int would_run = 0, up_to_date = 0;
