@@ -24,8 +24,8 @@ using Clock = std::chrono::steady_clock;
 namespace rime {
 namespace {
 
-constexpr int kLastFrame = 8;
-constexpr int kKills = 32;
+constexpr int kLastFrame = 16;
+constexpr int kKills = 40;
 const std::string kScene = test::SmallBakeScene("torture", kLastFrame);
 
 double Since(Clock::time_point start) { return std::chrono::duration<double>(Clock::now() - start).count(); }
