@@ -77,6 +77,8 @@ int RunProcess(const fs::path& program, const std::vector<std::string>& args, co
     std::ofstream header(log, std::ios::trunc);
     if (!header) throw IoError("cannot write log file", log.string());
     header << "$ " << CommandLine(program, args) << "\n";
+    // On a full disk the tool's own error message could not be logged either: stop here.
+    if (!header.flush()) throw IoError("cannot write log file (disk full?)", log.string());
   }
   // Everything the child needs is prepared before fork: only async-signal-safe calls after it.
   std::vector<std::string> storage{program.string()};
