@@ -529,7 +529,7 @@ TEST_F(Bake, OutputFolderFullOfShellSyntaxReachesNoShell) {
   const std::string path = getenv("PATH");
   setenv("PATH", ((root_ / "preview_tools").string() + ":" + path).c_str(), 1);
   const std::string marker = (root_ / "pwned").string();
-  const fs::path out = root_ / fmt::format("out 'q'; touch {0}1; '\"$(touch {0}2)`touch {0}3`\n❄ é", marker);
+  const fs::path out = root_ / fmt::format("out 'q'; touch {0}1; '\"$(touch {0}2)`touch {0}3` %d\n❄ é", marker);
   std::string output;
   const int code = rime::test::Run({RIME_BINARY_DIR "/bin/rime-bake", scene_.string(), "--tools", (root_ / "tools").string(), "-o", out.string()},
                                    root_ / "hostile.txt", output);

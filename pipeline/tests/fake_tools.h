@@ -109,7 +109,7 @@ mkdir -p "$(dirname "$png")"
 
 constexpr const char* kFfmpeg = R"SH(
 for last; do :; done
-echo "assembled" > "$last"
+echo "assembled" > "${last#file:}"
 )SH";
 
 /// Writes fake `blender` and `ffmpeg` into `folder` (put it on PATH to enable the preview stage).
