@@ -212,15 +212,21 @@ std::vector<Job> BuildGraph(const SceneDocument& doc, const BakeLayout& layout, 
     const std::int64_t count = last - first + 1;
     const int columns = std::min<std::int64_t>(doc.bake().contact_sheet_columns, count);
     const std::int64_t rows = (count + columns - 1) / columns;
+    // Paths reach the shell as positional parameters, never inside the script text: an output
+    // folder named `x'; rm -rf ~; '` is then just a folder name. Only numbers are formatted in.
+    // ffmpeg reads "file:" paths (no "name:" taken for a protocol), the input pattern with any '%'
+    // of the folder doubled, and writes the contact sheet as one literal file name (-update 1).
+    std::string folder_pattern = layout.preview().string();
+    for (std::size_t at = 0; (at = folder_pattern.find('%', at)) != std::string::npos; at += 2) folder_pattern.insert(at, "%");
+    const std::string input = "file:" + (fs::path(folder_pattern) / pattern.filename()).string();
     const std::string script = fmt::format(
-        "set -e; ff=\"$1\"; "
-        "\"$ff\" -nostdin -y -loglevel error -start_number {first} -i '{pattern}' "
-        "-vf 'scale=320:-2,tile={columns}x{rows}' -frames:v 1 '{sheet}.tmp.png' && mv '{sheet}.tmp.png' '{sheet}'; "
-        "\"$ff\" -nostdin -y -loglevel error -framerate {fps} -start_number {first} -i '{pattern}' "
-        "-vf 'pad=ceil(iw/2)*2:ceil(ih/2)*2' -c:v libx264 -pix_fmt yuv420p '{movie}.tmp.mp4' && mv '{movie}.tmp.mp4' '{movie}'",
-        fmt::arg("first", first), fmt::arg("pattern", pattern.string()), fmt::arg("columns", columns), fmt::arg("rows", rows),
-        fmt::arg("sheet", sheet.string()), fmt::arg("fps", scene.info.fps), fmt::arg("movie", movie.string()));
-    assemble.args = {"-c", script, "rime-bake-preview", options.ffmpeg->string()};
+        "set -e; ff=\"$1\"; input=\"$2\"; sheet=\"$3\"; movie=\"$4\"; "
+        "\"$ff\" -nostdin -y -loglevel error -start_number {first} -i \"$input\" "
+        "-vf 'scale=320:-2,tile={columns}x{rows}' -frames:v 1 -update 1 \"file:$sheet.tmp.png\" && mv -- \"$sheet.tmp.png\" \"$sheet\"; "
+        "\"$ff\" -nostdin -y -loglevel error -framerate {fps} -start_number {first} -i \"$input\" "
+        "-vf 'pad=ceil(iw/2)*2:ceil(ih/2)*2' -c:v libx264 -pix_fmt yuv420p \"file:$movie.tmp.mp4\" && mv -- \"$movie.tmp.mp4\" \"$movie\"",
+        fmt::arg("first", first), fmt::arg("columns", columns), fmt::arg("rows", rows), fmt::arg("fps", scene.info.fps));
+    assemble.args = {"-c", script, "rime-bake-preview", options.ffmpeg->string(), input, sheet.string(), movie.string()};
     assemble.key_args = {"contact sheet + mp4", std::to_string(first), std::to_string(last), std::to_string(columns)};
     for (std::int64_t f = first; f <= last; ++f) {
       assemble.inputs.push_back(io::FramePath(layout.preview(), "frame", f, "png"));

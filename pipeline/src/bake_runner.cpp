@@ -1,9 +1,5 @@
 #include "bake_runner.h"
 
-#include <fcntl.h>
-#include <sys/file.h>
-#include <unistd.h>
-
 #include <algorithm>
 #include <chrono>
 #include <condition_variable>
@@ -15,6 +11,7 @@
 #include <sstream>
 #include <thread>
 
+#include "bake_lock.h"
 #include "process.h"
 #include "rime/core/atomic_file.h"
 #include "rime/core/error.h"
@@ -166,7 +163,9 @@ struct Runner::Impl {
                          FrameSuffix(job), job.log.string()));
       } else {
         const std::string last = LastLogLine(job.log);
-        Fail(job, kExitStageFailed,
+        // A tool that could not write its output (disk full, file too large, permissions) makes
+        // the bake exit with the same code as any other write failure.
+        Fail(job, code == static_cast<int>(ExitCode::kIo) ? code : kExitStageFailed,
              fmt::format("stage {} failed{} ({} exited with code {}{}); log: {}", StageName(job.stage), FrameSuffix(job), job.tool_name, code,
                          last.empty() ? "" : ": " + last, job.log.string()));
       }
@@ -326,22 +325,19 @@ BakeResult Runner::Run() {
   fs::create_directories(layout_.logs());
   fs::create_directories(layout_.state_folder());
   // One bake per output folder at a time: two would overwrite each other's outputs and state.
-  // Farm tasks share the lock: each runs different jobs and writes its own records.
-  const fs::path lock_path = layout_.state_folder() / "lock";
-  const int lock_fd = open(lock_path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
-  if (lock_fd < 0 || flock(lock_fd, (options_.farm_task ? LOCK_SH : LOCK_EX) | LOCK_NB) != 0) {
-    if (lock_fd >= 0) close(lock_fd);
+  // Farm tasks share the lock: each runs different jobs and writes its own records. The stage
+  // tools inherit it, so it stays held until the last of them exits even if rime-bake is killed.
+  std::optional<BakeLock> bake_lock;
+  try {
+    bake_lock.emplace(layout_.state_folder() / "lock", layout_.output, options_.farm_task);
+  } catch (const Error& e) {
     BakeResult busy;
-    busy.exit_code = static_cast<int>(ExitCode::kIo);
-    busy.failure = options_.farm_task
-                       ? fmt::format("a local rime-bake is baking into {} (lock {}); farm tasks cannot run beside it", layout_.output.string(), lock_path.string())
-                       : fmt::format("another rime-bake is baking into {} (lock {})", layout_.output.string(), lock_path.string());
+    busy.exit_code = static_cast<int>(e.code());
+    busy.failure = e.what();
     return busy;
   }
-  struct LockRelease {
-    int fd;
-    ~LockRelease() { close(fd); }
-  } lock_release{lock_fd};
+  const ToolsInherit inherit_lock(bake_lock->fd());
+  if (!options_.farm_task) RemoveStaleTemporaries();
   // Progress counts tasks of about one frame's work each, so that the ETA is not thrown off by the
   // simulation (one job that takes longer than all the others): it counts as one task per output
   // frame, advanced as its frames appear; every other job is one task.
@@ -427,6 +423,9 @@ BakeResult Runner::Run() {
         Status s;
         try {
           s = impl.Execute(i);
+        } catch (const Error& e) {  // rime-bake's own writes (log, marker) keep their exit code
+          impl.Fail(jobs_[i], static_cast<int>(e.code()), fmt::format("{}: {}", jobs_[i].id, e.what()));
+          s = Status::kFailed;
         } catch (const std::exception& e) {
           impl.Fail(jobs_[i], static_cast<int>(ExitCode::kFailure), fmt::format("{}: {}", jobs_[i].id, e.what()));
           s = Status::kFailed;
@@ -450,7 +449,16 @@ BakeResult Runner::Run() {
   lock.unlock();
   for (auto& t : threads)
     if (t.joinable()) t.join();
-  impl.Save(true);
+  try {
+    impl.Save(true);
+  } catch (const Error& e) {  // a full disk: the first failure stays the message
+    if (impl.result.failure.empty()) {
+      impl.result.exit_code = static_cast<int>(e.code());
+      impl.result.failure = e.what();
+    } else {
+      impl.result.failure += fmt::format("; the bake state could not be saved either: {}", e.what());
+    }
+  }
   progress.Finish();
   if (impl.result.exit_code == 0 && Interrupted()) {
     impl.result.exit_code = static_cast<int>(ExitCode::kInterrupted);
@@ -458,6 +466,31 @@ BakeResult Runner::Run() {
   }
   impl.result.seconds = std::chrono::duration<double>(Clock::now() - start).count();
   return impl.result;
+}
+
+// Temporaries are named `<final>.tmp.<pid>.<n>` (rime/core/atomic_file.h); one left in a folder
+// the bake writes belongs to a writer that was killed, since the lock excludes live ones.
+void Runner::RemoveStaleTemporaries() {
+  std::set<fs::path> folders = {layout_.state_folder(), layout_.state_folder() / "incomplete"};
+  for (const Job& job : jobs_)
+    for (const auto& output : job.outputs) folders.insert(output.parent_path());
+  int removed = 0;
+  for (const fs::path& folder : folders) {
+    std::error_code ec;
+    for (fs::directory_iterator it(folder, ec), end; !ec && it != end; it.increment(ec)) {
+      const std::string name = it->path().filename().string();
+      const auto tmp = name.rfind(".tmp.");
+      if (tmp == std::string::npos || tmp == 0) continue;
+      const std::string tail = name.substr(tmp + 5);  // "<pid>.<n>"
+      const auto dot = tail.find('.');
+      const bool digits = dot != std::string::npos && dot > 0 && dot + 1 < tail.size() &&
+                          tail.find_first_not_of("0123456789.") == std::string::npos && tail.find('.', dot + 1) == std::string::npos;
+      if (!digits) continue;
+      std::error_code remove_ec;
+      if (fs::remove(it->path(), remove_ec)) ++removed;
+    }
+  }
+  if (removed) log::Info("removed {} temporary files left by an interrupted run", removed);
 }
 
 std::vector<std::vector<std::string>> Runner::Plan() {

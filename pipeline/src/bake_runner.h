@@ -71,6 +71,7 @@ class Runner {
  private:
   struct Impl;
   std::vector<std::vector<std::string>> Plan(const std::vector<bool>& selected, const std::set<std::size_t>& forced);
+  void RemoveStaleTemporaries();
   const SceneDocument& doc_;
   BakeLayout layout_;
   std::vector<Job> jobs_;

@@ -253,8 +253,8 @@ std::pair<std::int64_t, std::int64_t> FrameSpan(const FarmContext& farm) {
   return {std::max<std::int64_t>(0, farm.graph.first_frame), std::min(farm.doc->scene().FrameCount(), farm.graph.last_frame)};
 }
 
-// The batch script every task runs: its arguments are the task's command line, passed by sbatch
-// as an argument vector, so no scene value is ever interpreted by a shell.
+}  // namespace
+
 std::string TaskScriptText(const FarmSettings& settings) {
   std::string text = "#!/bin/sh\n# rime-bake farm task: runs its arguments (a `rime-bake --farm-task` command line) unchanged.\n";
   for (const auto& line : settings.sbatch_lines) text += "#SBATCH " + line + "\n";
@@ -267,8 +267,6 @@ std::string TaskScriptText(const FarmSettings& settings) {
       "exec \"$@\"\n";
   return text;
 }
-
-}  // namespace
 
 std::optional<FarmRecordedBake> RecordedFarmBake(const BakeLayout& layout) {
   const JobsRecord record = ReadJobs(layout);

@@ -47,6 +47,11 @@ struct FarmRecordedBake {
 };
 std::optional<FarmRecordedBake> RecordedFarmBake(const BakeLayout& layout);
 
+/// The batch script every task runs: its arguments are the task's command line, passed by sbatch
+/// as an argument vector, so no scene value is ever interpreted by a shell. Scene values appear in
+/// it only as the site's `#SBATCH` lines, one option each (LoadFarmSettings refuses line breaks).
+std::string TaskScriptText(const FarmSettings& settings);
+
 /// Refuses (rime::Error) when jobs of the last submission are still queued or running: a local
 /// bake beside them would overwrite what they write.
 void RefuseWhileFarmJobsAlive(const BakeLayout& layout);

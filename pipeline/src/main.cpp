@@ -56,7 +56,8 @@ int main(int argc, char** argv) {
   app.add_option("--farm-sim-job", farm_sim_job)->group("");
   app.footer(
       "Exit codes: 0 ok (everything up to the target is up to date), 1 internal failure, 2 bad command line, 3 bad scene file or "
-      "missing stage tool, 5 cannot write the output or cache (or another rime-bake is using it), 7 a stage failed (the message names stage, frame and log), "
+      "missing stage tool, 5 cannot write the output or cache, a stage tool could not write its output, or another rime-bake is using the "
+      "folder (the message names its pid, host and start time), 7 a stage failed (the message names stage, frame and log), "
       "8 --only refused (inputs missing or stale), 9 --farm: Slurm's commands missing or a submission refused, 130 interrupted (rerun to continue; the simulation resumes).");
 
   return tool::Main(app, argc, argv, common, [&]() -> int {
@@ -181,7 +182,10 @@ int main(int argc, char** argv) {
           {"ran", st.ran}, {"empty", st.empty}, {"cached", st.cached}, {"failed", st.failed}, {"not_run", st.not_run}, {"seconds", st.seconds}};
     }
     tool::WriteSummary(common, summary);
-    if (result.exit_code == kExitOnlyRefused || result.exit_code == static_cast<int>(ExitCode::kIo)) throw Error(static_cast<ExitCode>(result.exit_code), result.failure);
+    int jobs_seen = 0;  // none when the bake was refused before running anything (--only, the lock)
+    for (const auto& st : result.stages) jobs_seen += st.ran + st.cached + st.failed + st.not_run;
+    if (result.exit_code == kExitOnlyRefused || (result.exit_code == static_cast<int>(ExitCode::kIo) && jobs_seen == 0))
+      throw Error(static_cast<ExitCode>(result.exit_code), result.failure);
     if (!common.quiet) {
       if (dry_run) {
         int would_run = 0, up_to_date = 0;

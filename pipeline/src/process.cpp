@@ -25,12 +25,13 @@ namespace {
 constexpr int kMaxChildren = 256;
 std::array<std::atomic<pid_t>, kMaxChildren> g_children{};
 std::atomic<bool> g_interrupted{false};
+std::atomic<int> g_inherited_fd{-1};
 
 void ForwardSignal(int signal) {
   g_interrupted = true;
   for (auto& pid : g_children) {
     const pid_t p = pid.load();
-    if (p > 0) kill(p, SIGTERM);
+    if (p > 0) kill(-p, SIGTERM);  // the tool's process group: a shell's children too
   }
 }
 
@@ -61,6 +62,9 @@ void InstallSignalHandlers() {
 
 bool Interrupted() { return g_interrupted.load(); }
 
+ToolsInherit::ToolsInherit(int fd) { g_inherited_fd = fd; }
+ToolsInherit::~ToolsInherit() { g_inherited_fd = -1; }
+
 std::string CommandLine(const fs::path& program, const std::vector<std::string>& args) {
   std::string line = Quote(program.string());
   for (const auto& a : args) line += " " + Quote(a);
@@ -73,6 +77,8 @@ int RunProcess(const fs::path& program, const std::vector<std::string>& args, co
     std::ofstream header(log, std::ios::trunc);
     if (!header) throw IoError("cannot write log file", log.string());
     header << "$ " << CommandLine(program, args) << "\n";
+    // On a full disk the tool's own error message could not be logged either: stop here.
+    if (!header.flush()) throw IoError("cannot write log file (disk full?)", log.string());
   }
   // Everything the child needs is prepared before fork: only async-signal-safe calls after it.
   std::vector<std::string> storage{program.string()};
@@ -83,6 +89,7 @@ int RunProcess(const fs::path& program, const std::vector<std::string>& args, co
   const int log_fd = open(log.c_str(), O_WRONLY | O_APPEND | O_CLOEXEC);
   if (log_fd < 0) throw IoError("cannot open log file", log.string());
   const pid_t parent = getpid();
+  const int inherited_fd = g_inherited_fd.load();
 
   const pid_t pid = fork();
   if (pid < 0) {
@@ -93,20 +100,23 @@ int RunProcess(const fs::path& program, const std::vector<std::string>& args, co
     // A bake killed with SIGKILL must not leave tools running: they die with their parent.
     prctl(PR_SET_PDEATHSIG, SIGTERM);
     if (getppid() != parent) _exit(130);
+    setpgid(0, 0);  // a group of its own, so that stopping it reaches whatever it starts
     dup2(log_fd, STDOUT_FILENO);
     dup2(log_fd, STDERR_FILENO);
     const int null_fd = open("/dev/null", O_RDONLY);
     if (null_fd >= 0) dup2(null_fd, STDIN_FILENO);
     signal(SIGINT, SIG_DFL);
     signal(SIGTERM, SIG_DFL);
+    if (inherited_fd >= 0) fcntl(inherited_fd, F_SETFD, 0);  // clears FD_CLOEXEC in this child only
     execv(argv[0], argv.data());
     const char message[] = "rime-bake: error: cannot execute the tool\n";
     [[maybe_unused]] auto n = write(STDERR_FILENO, message, sizeof(message) - 1);
     _exit(127);
   }
   close(log_fd);
+  setpgid(pid, pid);  // also here, so that the group exists before any signal is forwarded to it
   const int slot = RegisterChild(pid);
-  if (Interrupted()) kill(pid, SIGTERM);
+  if (Interrupted()) kill(-pid, SIGTERM);
   int status = 0;
   while (waitpid(pid, &status, 0) < 0 && errno == EINTR) {
   }

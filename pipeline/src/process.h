@@ -11,7 +11,8 @@ namespace rime::bake {
 
 /// Runs `program args...`, stdout and stderr appended to `log` (after a header line with the
 /// command). Returns the exit status, or 128 + signal number when the tool was killed.
-/// Running tools get SIGTERM when rime-bake receives SIGINT/SIGTERM (see InstallSignalHandlers).
+/// Each tool runs in a process group of its own, which gets SIGTERM when rime-bake receives
+/// SIGINT/SIGTERM (see InstallSignalHandlers), and the tool alone SIGTERM when rime-bake dies.
 int RunProcess(const std::filesystem::path& program, const std::vector<std::string>& args, const std::filesystem::path& log);
 
 /// What a client program (sbatch, squeue) printed, and how it ended.
@@ -21,6 +22,15 @@ struct Captured {
 };
 /// Runs `program args...` to completion with stdout and stderr captured (argument vector, no shell).
 Captured CaptureProcess(const std::filesystem::path& program, const std::vector<std::string>& args);
+
+/// While alive, tools started by RunProcess inherit `fd` (the bake lock) across exec.
+class ToolsInherit {
+ public:
+  explicit ToolsInherit(int fd);
+  ~ToolsInherit();
+  ToolsInherit(const ToolsInherit&) = delete;
+  ToolsInherit& operator=(const ToolsInherit&) = delete;
+};
 
 /// Forwards SIGINT/SIGTERM to running tools and records that the bake was interrupted.
 void InstallSignalHandlers();

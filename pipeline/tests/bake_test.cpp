@@ -6,9 +6,11 @@
 #include <spawn.h>
 #include <fcntl.h>
 #include <sys/file.h>
+#include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <fmt/format.h>
 #include <filesystem>
@@ -17,7 +19,9 @@
 #include <sstream>
 #include <thread>
 
+#include "bake_outputs.h"
 #include "fake_tools.h"
+#include "farm.h"
 #include "rime/core/error.h"
 #include "rime/io/scene.h"
 
@@ -91,6 +95,13 @@ class Bake : public ::testing::Test {
     ASSERT_NE(at, std::string::npos) << from;
     text.replace(at, from.size(), to);
     WriteFile(scene_, text);
+  }
+  /// Waits until no process holds the bake lock (the tools of a killed bake keep it until they exit).
+  void WaitUntilUnlocked() const {
+    const int fd = open((Out() / "cache/.rime-bake/lock").c_str(), O_RDWR | O_CLOEXEC);
+    if (fd < 0) return;
+    for (int k = 0; k < 200 && flock(fd, LOCK_EX | LOCK_NB) != 0; ++k) std::this_thread::sleep_for(std::chrono::milliseconds(25));
+    close(fd);
   }
   /// Moves a file's mtime forward without changing its content (like `touch`).
   static void Touch(const fs::path& p) { fs::last_write_time(p, fs::last_write_time(p) + std::chrono::seconds(5)); }
@@ -312,7 +323,7 @@ TEST_F(Bake, KilledDuringSimulationResumes) {
   kill(pid, SIGKILL);  // no chance to clean up; the fake sim dies with it (PR_SET_PDEATHSIG)
   int status = 0;
   waitpid(pid, &status, 0);
-  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  WaitUntilUnlocked();  // its `sleep` outlives it, holding the inherited lock
   EXPECT_FALSE(fs::exists(Out() / "cache/sim/particles.0003.h5part"));
   EXPECT_TRUE(fs::exists(Out() / "cache/.rime-bake/incomplete/sim"));
 
@@ -393,16 +404,155 @@ TEST_F(Bake, InterruptStopsTheBakeAndTheRerunResumes) {
   EXPECT_NE(lines.front().find("--resume"), std::string::npos) << lines.front();
 }
 
-TEST_F(Bake, SecondBakeIntoTheSameFolderIsRefused) {
-  fs::create_directories(Out() / "cache/.rime-bake");
-  const int fd = open((Out() / "cache/.rime-bake/lock").c_str(), O_RDWR | O_CREAT, 0644);
-  ASSERT_GE(fd, 0);
-  ASSERT_EQ(flock(fd, LOCK_EX), 0);  // as a running bake holds it
+std::string HostName() {
+  char name[256] = {};
+  gethostname(name, sizeof name - 1);
+  return name;
+}
+
+// The pid of a process that has just exited (and been reaped).
+pid_t DeadPid() {
+  const pid_t pid = fork();
+  if (pid == 0) _exit(0);
+  waitpid(pid, nullptr, 0);
+  return pid;
+}
+
+TEST_F(Bake, SecondBakeIntoTheSameFolderIsRefusedNamingTheHolder) {
+  setenv("FAKE_SIM_SLEEP", "0.5", 1);
+  const pid_t first = rime::test::Spawn({RIME_BINARY_DIR "/bin/rime-bake", scene_.string(), "--tools", (root_ / "tools").string(), "-o",
+                                         Out().string(), "-q"},
+                                        root_ / "first.txt");
+  ASSERT_GT(first, 0);
+  for (int k = 0; k < 200 && !fs::exists(Out() / "cache/sim/particles.0000.h5part"); ++k) std::this_thread::sleep_for(std::chrono::milliseconds(25));
   EXPECT_EQ(RunBake(), 5) << output_;
-  EXPECT_NE(output_.find("another rime-bake is baking into"), std::string::npos) << output_;
-  EXPECT_TRUE(Invocations().empty());
-  close(fd);
+  // One line: who holds the lock (pid, host, start time) and which lock it is.
+  EXPECT_NE(output_.find(fmt::format("rime-bake: error: another rime-bake is baking into {} (pid {} on host {}, started ", Out().string(), first,
+                                     HostName())),
+            std::string::npos)
+      << output_;
+  EXPECT_NE(output_.find("UTC) (" + (Out() / "cache/.rime-bake/lock").string() + ")"), std::string::npos) << output_;
+  EXPECT_EQ(std::count(output_.begin(), output_.end(), '\n'), 1) << output_;
+  EXPECT_EQ(Invocations().count("rime-surface"), 0u) << "the refused bake must run nothing";
+  EXPECT_EQ(rime::test::WaitExit(first), 0) << ReadFile(root_ / "first.txt");
+  EXPECT_EQ(ReadFile(Out() / "cache/.rime-bake/lock"), "") << "a bake that ends normally clears its holder line";
+  unsetenv("FAKE_SIM_SLEEP");
   EXPECT_EQ(RunBake(), 0) << output_;
+  EXPECT_EQ(output_.find("stale lock"), std::string::npos) << output_;
+}
+
+TEST_F(Bake, StaleLockOfADeadBakeIsReportedAndRecovered) {
+  fs::create_directories(Out() / "cache/.rime-bake");
+  const pid_t dead = DeadPid();
+  WriteFile(Out() / "cache/.rime-bake/lock", fmt::format("pid={} host={} started=2026-01-02T03:04:05Z\n", dead, HostName()));
+  // A temporary a killed writer left beside a final file goes too.
+  fs::create_directories(Out() / "surface");
+  WriteFile(Out() / "surface/ice.0001.obj.tmp.999999.0", "half a mesh");
+  ASSERT_EQ(RunBake(), 0) << output_;
+  EXPECT_NE(output_.find(fmt::format("stale lock from pid {} ({}, started 2026-01-02 03:04:05 UTC) recovered", dead, HostName())), std::string::npos)
+      << output_;
+  EXPECT_FALSE(fs::exists(Out() / "surface/ice.0001.obj.tmp.999999.0")) << output_;
+  EXPECT_NE(output_.find("removed 1 temporary files left by an interrupted run"), std::string::npos) << output_;
+  ASSERT_EQ(RunBake(), 0) << output_;
+  EXPECT_EQ(output_.find("stale lock"), std::string::npos) << "the holder line is cleared once recovered:\n" << output_;
+}
+
+// On a filesystem shared by several hosts flock may be node-local, so a lock that names a process
+// on another host cannot be told stale from here: it is refused with what to do about it.
+TEST_F(Bake, LockNamingAnotherHostIsRefusedNotTakenOver) {
+  fs::create_directories(Out() / "cache/.rime-bake");
+  WriteFile(Out() / "cache/.rime-bake/lock", "pid=4242 host=render-node-17 started=2026-01-02T03:04:05Z\n");
+  EXPECT_EQ(RunBake(), 5) << output_;
+  EXPECT_NE(output_.find("the bake lock names pid 4242 on host render-node-17, started 2026-01-02 03:04:05 UTC, which cannot be checked from "
+                         "host " + HostName() + "; if no rime-bake runs there any more, delete the lock file and rerun"),
+            std::string::npos)
+      << output_;
+  EXPECT_TRUE(Invocations().empty());
+}
+
+// The stage tools inherit the lock: a bake killed with SIGKILL keeps its folder locked until the
+// last of its tools has exited, so a rerun cannot race a tool that is still writing.
+TEST_F(Bake, ToolsOfAKilledBakeHoldTheLockUntilTheyExit) {
+  setenv("FAKE_SIM_SLEEP", "3", 1);  // the fake simulation's `sleep 3` outlives the killed bake
+  const pid_t bake = rime::test::Spawn({RIME_BINARY_DIR "/bin/rime-bake", scene_.string(), "--tools", (root_ / "tools").string(), "-o",
+                                        Out().string(), "-q"},
+                                       root_ / "killed.txt");
+  ASSERT_GT(bake, 0);
+  for (int k = 0; k < 200 && ReadFile(root_ / "invocations.log").find("rime-sim") == std::string::npos; ++k)
+    std::this_thread::sleep_for(std::chrono::milliseconds(25));
+  std::this_thread::sleep_for(std::chrono::milliseconds(200));
+  kill(bake, SIGKILL);
+  rime::test::WaitExit(bake);
+  unsetenv("FAKE_SIM_SLEEP");
+  EXPECT_EQ(RunBake(), 5) << output_;
+  EXPECT_NE(output_.find(fmt::format("stage tools started by a killed rime-bake (pid {} on host {}", bake, HostName())), std::string::npos)
+      << output_;
+  WaitUntilUnlocked();
+  ASSERT_EQ(RunBake(), 0) << output_;
+  EXPECT_NE(output_.find(fmt::format("stale lock from pid {} ({}", bake, HostName())), std::string::npos) << output_;
+}
+
+TEST_F(Bake, StageToolThatCannotWriteMakesTheBakeExit5NamingTheFile) {
+  setenv("FAKE_FAIL", "surface:2", 1);
+  setenv("FAKE_FAIL_CODE", "5", 1);
+  EXPECT_EQ(RunBake(), 5) << output_;
+  unsetenv("FAKE_FAIL");
+  unsetenv("FAKE_FAIL_CODE");
+  EXPECT_NE(output_.find(fmt::format("rime-bake: error: stage surface failed on frame 2 (rime-surface exited with code 5: rime-surface: error: "
+                                     "cannot write VDB file: No space left on device ({}/ice.0002.vdb)); log: ",
+                                     (Out() / "surface").string())),
+            std::string::npos)
+      << output_;
+  EXPECT_EQ(RunBake(), 0) << output_;
+}
+
+// The preview's contact sheet and movie run ffmpeg through /bin/sh: the output folder reaches
+// that shell as an argument, never as part of the script, whatever characters it holds.
+TEST_F(Bake, OutputFolderFullOfShellSyntaxReachesNoShell) {
+  testing::WriteFakePreviewTools(root_ / "preview_tools");
+  const std::string path = getenv("PATH");
+  setenv("PATH", ((root_ / "preview_tools").string() + ":" + path).c_str(), 1);
+  const std::string marker = (root_ / "pwned").string();
+  const fs::path out = root_ / fmt::format("out 'q'; touch {0}1; '\"$(touch {0}2)`touch {0}3` %d\n❄ é", marker);
+  std::string output;
+  const int code = rime::test::Run({RIME_BINARY_DIR "/bin/rime-bake", scene_.string(), "--tools", (root_ / "tools").string(), "-o", out.string()},
+                                   root_ / "hostile.txt", output);
+  setenv("PATH", path.c_str(), 1);
+  ASSERT_EQ(code, 0) << output;
+  for (int k = 1; k <= 3; ++k) EXPECT_FALSE(fs::exists(fmt::format("{}{}", marker, k))) << "an injected command ran";
+  EXPECT_TRUE(fs::exists(out / "preview/contact_sheet.png")) << output;
+  EXPECT_TRUE(fs::exists(out / "preview/preview.mp4")) << output;
+}
+
+// The farm's batch script runs its arguments as they are: a task command line full of shell
+// syntax runs nothing else, and a site `#SBATCH` entry cannot smuggle in a line of script.
+TEST_F(Bake, FarmTaskScriptPassesArgumentsThroughUnchanged) {
+  FarmSettings settings;
+  settings.sbatch_lines = {"--constraint=avx2"};
+  const std::string text = TaskScriptText(settings);
+  EXPECT_NE(text.find("\n#SBATCH --constraint=avx2\n"), std::string::npos) << text;
+  WriteFile(root_ / "task.sh", text);
+  WriteFile(root_ / "print_args", "#!/bin/sh\nfor a; do printf '%s\\0' \"$a\"; done\n");
+  chmod((root_ / "print_args").c_str(), 0755);
+  const std::string marker = (root_ / "pwned").string();
+  const std::vector<std::string> hostile = {"a;b", fmt::format("$(touch {})", marker), fmt::format("`touch {}`", marker), "'\"\\", "x\ny ❄", "*"};
+  std::vector<std::string> args = {"/bin/sh", (root_ / "task.sh").string(), (root_ / "print_args").string()};
+  args.insert(args.end(), hostile.begin(), hostile.end());
+  std::string printed;
+  ASSERT_EQ(rime::test::Run(args, root_ / "printed.txt", printed), 0) << printed;
+  std::string expected;
+  for (const auto& a : hostile) expected += a + '\0';
+  EXPECT_EQ(printed, expected);
+  EXPECT_FALSE(fs::exists(marker)) << "an injected command ran";
+
+  WriteFile(root_ / "site.toml", "[farm]\nsbatch = [\"--comment=x\\ntouch " + marker + "\"]\n");
+  try {
+    LoadFarmSettings(root_ / "site.toml", scene_);
+    ADD_FAILURE() << "an sbatch entry with a line break was accepted";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), ExitCode::kBadInput);
+    EXPECT_NE(std::string(e.what()).find("is not one sbatch option"), std::string::npos) << e.what();
+  }
 }
 
 TEST_F(Bake, CorruptStateRebuildsEverythingWithAWarning) {

@@ -37,7 +37,8 @@ min = [0.0, 0.0, 0.1]
 max = [0.2, 0.2, 0.3]
 )";
 
-// FAKE_FAIL=<stage>:<frame> makes that stage fail on that frame; FAKE_SIM_SLEEP slows each frame.
+// FAKE_FAIL=<stage>:<frame> makes that stage fail on that frame (FAKE_FAIL_CODE: the surface's exit
+// code, default 3; 5 says it could not write); FAKE_SIM_SLEEP slows each frame.
 constexpr const char* kPreamble = R"SH(#!/bin/bash
 set -e
 echo "$(basename "$0") $*" >> "$FAKE_LOG"
@@ -72,7 +73,10 @@ echo '{}' > "$out/stats.jsonl.tmp"; mv "$out/stats.jsonl.tmp" "$out/stats.jsonl"
 constexpr const char* kSurface = R"SH(
 input=$1; out=$3; scene=$5
 frame=$(basename "$input" | sed -E 's/particles\.([0-9]+)\.h5part/\1/')
-if fail_here surface $((10#$frame)); then echo "rime-surface: error: no particles in frame (fake) ($input)" >&2; exit 3; fi
+if fail_here surface $((10#$frame)); then
+  if [ "${FAKE_FAIL_CODE:-3}" = 5 ]; then echo "rime-surface: error: cannot write VDB file: No space left on device ($out/ice.$frame.vdb)" >&2; exit 5; fi
+  echo "rime-surface: error: no particles in frame (fake) ($input)" >&2; exit 3
+fi
 mkdir -p "$out"
 phases="ice water"  # [surface] phase defaults to "both"
 if section surface "$scene" | grep -q 'phase *= *"ice"'; then phases=ice; fi
@@ -105,7 +109,7 @@ mkdir -p "$(dirname "$png")"
 
 constexpr const char* kFfmpeg = R"SH(
 for last; do :; done
-echo "assembled" > "$last"
+echo "assembled" > "${last#file:}"
 )SH";
 
 /// Writes fake `blender` and `ffmpeg` into `folder` (put it on PATH to enable the preview stage).

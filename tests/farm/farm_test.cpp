@@ -18,6 +18,7 @@
 #include <sstream>
 #include <thread>
 
+#include "bake_outputs.h"
 #include "fake_tools.h"
 #include "local_slurm.h"
 #include "small_bake_scene.h"
@@ -35,54 +36,8 @@ using bake::testing::kFakeScene;
 
 constexpr auto kFarmTimeout = std::chrono::seconds(150);
 
-std::string ReadFile(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  std::stringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
-
-void DropTimings(json& value) {
-  if (value.is_object()) {
-    for (auto it = value.begin(); it != value.end();) {
-      if (it.key().find("seconds") != std::string::npos) it = value.erase(it);
-      else DropTimings(*it++);
-    }
-  } else if (value.is_array()) {
-    for (auto& item : value) DropTimings(item);
-  }
-}
-
-// Every file a bake leaves outside its own bookkeeping (state, logs), by path relative to `root`.
-// Reports (.json, .jsonl) record how long each step took and where the output folder is: those
-// fields are left out (timings dropped, the folder written as $OUT); every other byte counts.
-std::map<std::string, std::string> Outputs(const fs::path& root) {
-  std::map<std::string, std::string> files;
-  for (const auto& entry : fs::recursive_directory_iterator(root)) {
-    if (!entry.is_regular_file()) continue;
-    const std::string name = entry.path().lexically_relative(root).generic_string();
-    if (name.rfind("cache/.rime-bake/", 0) == 0 || name.rfind("cache/logs/", 0) == 0) continue;
-    std::string bytes = ReadFile(entry.path());
-    const std::string ext = entry.path().extension().string();
-    if (ext == ".json" || ext == ".jsonl") {
-      std::vector<std::string> records = {bytes};
-      if (ext == ".jsonl") {
-        records.clear();
-        std::istringstream lines(bytes);
-        for (std::string line; std::getline(lines, line);) records.push_back(line);
-      }
-      bytes.clear();
-      for (const auto& record : records) {
-        json value = json::parse(record, nullptr, false);
-        DropTimings(value);
-        bytes += value.dump() + "\n";
-      }
-      for (std::size_t at; (at = bytes.find(root.string())) != std::string::npos;) bytes.replace(at, root.string().size(), "$OUT");
-    }
-    files[name] = bytes;
-  }
-  return files;
-}
+using test::Outputs;
+using test::ReadFile;
 
 class Farm : public ::testing::Test {
  protected:
@@ -192,6 +147,42 @@ class Farm : public ::testing::Test {
   std::string output_;
   json summary_;
 };
+
+// Scene values full of shell syntax reach sbatch as literal arguments: the dry run's commands,
+// run by bash with sbatch replaced by a function that prints its arguments, run nothing else.
+TEST_F(Farm, HostileNamesReachSbatchAsLiteralArguments) {
+  // Each command would create a marker file in the working folder, root_, if a shell ran it.
+  const fs::path previous_folder = fs::current_path();
+  fs::current_path(root_);
+  const std::string hostile = "a;b $(touch p1) `touch p2` 'sq' \"dq\" & | ❄\nline 2; touch p3";
+  std::string toml_name;
+  for (char c : hostile) toml_name += c == '"' ? std::string("\\\"") : c == '\n' ? std::string("\\n") : std::string(1, c);
+  std::string scene = kFakeScene;
+  scene.insert(scene.find("[scene]\n") + 8, "name = \"" + toml_name + "\"\n");
+  std::ofstream(root_ / "hostile.toml") << scene;
+  const fs::path out = root_ / ("out " + hostile);
+  std::string printed;
+  ASSERT_EQ(test::Run({RIME_BINARY_DIR "/bin/rime-bake", (root_ / "hostile.toml").string(), "cleanup", "-o", out.string(), "--tools",
+                       (root_ / "tools").string(), "--farm", "slurm", "--dry-run", "-q"},
+                      root_ / "dry.txt", printed),
+            0)
+      << printed;
+  printed.erase(printed.find("rime-bake: dry run:"));  // the closing count, printed last
+  std::ofstream(root_ / "submit.sh") << "sbatch() { printf '%s\\0' \"$@\"; printf '\\n'; }\n" << printed;
+  std::string args_text;
+  ASSERT_EQ(test::Run({"/bin/bash", (root_ / "submit.sh").string()}, root_ / "args.txt", args_text), 0) << args_text;
+  std::vector<std::string> args;
+  for (std::size_t at = 0, end; (end = args_text.find('\0', at)) != std::string::npos; at = end + 1)
+    args.push_back(args_text.substr(at, end - at));
+  for (auto& a : args)
+    if (!a.empty() && a.front() == '\n') a.erase(0, 1);
+  const auto has = [&](const std::string& value) { return std::find(args.begin(), args.end(), value) != args.end(); };
+  EXPECT_TRUE(has("--job-name=rime:" + hostile + ":boundary")) << args_text;
+  EXPECT_TRUE(has("--chdir=" + out.string())) << args_text;
+  EXPECT_TRUE(has(out.string())) << "the task's -o gets the folder literally:\n" << args_text;
+  for (int k = 1; k <= 3; ++k) EXPECT_FALSE(fs::exists(root_ / fmt::format("p{}", k))) << "an injected command ran";
+  fs::current_path(previous_folder);
+}
 
 // Settings errors name file, line and key; the dry run shows the sbatch commands (arrays chained
 // per frame, the surface array streaming the simulation's frames) without any cluster.

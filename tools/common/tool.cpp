@@ -4,6 +4,7 @@
 
 #include <fmt/format.h>
 
+#include <csignal>
 #include <cstdio>
 #include <regex>
 
@@ -46,6 +47,9 @@ int Main(CLI::App& app, int argc, char** argv, const CommonOptions& options, con
     // --help and --version exit 0; every command-line error gets the documented code 2.
     return app.exit(e) == 0 ? 0 : static_cast<int>(ExitCode::kUsage);
   }
+  // Past a file size limit (ulimit -f) a write then fails with EFBIG and the tool reports which
+  // file it was writing, instead of being killed by SIGXFSZ with a half-written temporary.
+  std::signal(SIGXFSZ, SIG_IGN);
   try {
     Apply(options);
     return body();

@@ -48,10 +48,21 @@ void AtomicFile::Commit() {
 void WriteFileAtomically(const std::filesystem::path& path, const std::string& contents) {
   AtomicFile file(path);
   {
-    std::ofstream out(file.temp_path(), std::ios::binary);
-    out << contents;
-    out.flush();
-    if (!out) throw IoError("cannot write file (disk full?)", path.string());
+    // POSIX calls rather than a stream, so the message can say why (ENOSPC, EFBIG, EACCES).
+    const int fd = ::open(file.temp_path().c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+    if (fd < 0) throw IoError(std::string("cannot create file: ") + std::strerror(errno), path.string());
+    std::size_t written = 0;
+    while (written < contents.size()) {
+      const ssize_t n = ::write(fd, contents.data() + written, contents.size() - written);
+      if (n < 0 && errno == EINTR) continue;
+      if (n <= 0) {
+        const int error = n < 0 ? errno : ENOSPC;
+        ::close(fd);
+        throw IoError(std::string("cannot write file: ") + std::strerror(error), path.string());
+      }
+      written += static_cast<std::size_t>(n);
+    }
+    if (::close(fd) != 0) throw IoError(std::string("cannot write file: ") + std::strerror(errno), path.string());
   }
   file.Commit();
 }

@@ -5,6 +5,8 @@
 #include <fmt/format.h>
 
 #include <algorithm>
+#include <cerrno>
+#include <cstring>
 #include <type_traits>
 
 #include "rime/core/atomic_file.h"
@@ -41,7 +43,13 @@ class Handle {
 };
 
 struct SilenceHdf5 {
-  SilenceHdf5() { H5Eset_auto2(H5E_DEFAULT, nullptr, nullptr); }
+  SilenceHdf5() {
+    // A file whose write failed (disk full) cannot be closed; HDF5's exit handler would then
+    // crash closing it again, turning a clear error and exit 5 into a segfault. Every file is
+    // closed explicitly on success, so the handler has nothing to do anyway.
+    H5dont_atexit();
+    H5Eset_auto2(H5E_DEFAULT, nullptr, nullptr);
+  }
 };
 const SilenceHdf5 g_silence;
 
@@ -54,7 +62,13 @@ template <> hid_t NativeType<std::int64_t>() { return H5T_NATIVE_INT64; }
 template <> hid_t NativeType<std::uint8_t>() { return H5T_NATIVE_UINT8; }
 
 void Check(herr_t status, const std::string& what, const fs::path& file) {
-  if (status < 0) throw IoError("cannot write " + what + " (disk full or not writable?)", file.string());
+  if (status >= 0) return;
+  // HDF5 leaves errno from the failed write(2); only a write error's errno is named, since HDF5
+  // may leave a stale one (ENOENT from a probe) when it failed for a reason of its own.
+  const int error = errno;
+  if (error == ENOSPC || error == EFBIG || error == EDQUOT || error == EIO || error == EROFS || error == EACCES)
+    throw IoError(fmt::format("cannot write {}: {}", what, std::strerror(error)), file.string());
+  throw IoError("cannot write " + what + " (disk full or not writable?)", file.string());
 }
 
 void WriteNumberAttribute(hid_t object, const char* name, hid_t type, const void* value, const fs::path& file) {

@@ -23,9 +23,17 @@ void ParseTransform(TomlReader& t, Transform& transform) {
   transform.up_axis = t.String("up_axis", transform.up_axis, {"z", "y"});
 }
 
+// Scene and solid names become file and folder names (out/<scene>, <solid>.h5part): any
+// character a filename can hold is fine, but a '/' or a name like ".." would leave the folder.
+std::string FileNameSafe(TomlReader& t, const char* key, std::string value) {
+  if (value.empty() || value == "." || value == ".." || value.find_first_of(std::string("/\0", 2)) != std::string::npos)
+    t.Fail(key, fmt::format("'{}' cannot be used as a file name (it is empty, '.' or '..', or holds a '/')", value));
+  return value;
+}
+
 SolidObject ParseSolid(TomlReader& t, std::size_t index) {
   SolidObject s;
-  s.name = t.String("name", fmt::format("solid{}", index));
+  s.name = FileNameSafe(t, "name", t.String("name", fmt::format("solid{}", index)));
   s.shape = t.String("shape", s.shape, {"box", "plane", "sphere", "cylinder", "torus", "mesh"});
   if (s.shape == "mesh") {
     if (!t.Has("mesh")) t.Fail("mesh", "shape = \"mesh\" needs a mesh file path");
@@ -152,7 +160,7 @@ Scene ParseScene(const std::string& text, const fs::path& file) {
 
   {
     TomlReader t = top.Table("scene");
-    scene.info.name = t.String("name", file.stem().string());
+    scene.info.name = FileNameSafe(t, "name", t.String("name", file.stem().string()));
     scene.info.fps = t.Number("fps", scene.info.fps, {0, 10000, true, false});
     scene.info.end_time = t.Number("end_time", scene.info.end_time, Range::Positive());
     scene.info.quality = t.String("quality", "", {"preview", "production", "reference"});
