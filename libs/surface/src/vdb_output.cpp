@@ -277,8 +277,16 @@ void WriteVdb(const std::filesystem::path& path, const Result& result) {
     file.setCompression(openvdb::io::COMPRESS_BLOSC | openvdb::io::COMPRESS_ACTIVE_MASK);
     file.write(grids);
     file.close();
-  } catch (const openvdb::Exception& e) {
-    throw IoError(fmt::format("cannot write VDB file: {}", e.what()), path.string());
+    // OpenVDB does not check its stream: a full disk or a file size limit leaves a short file
+    // without an error. Reading every grid back is what proves the file complete.
+    openvdb::io::File check(atomic.temp_path().string());
+    check.open(false);
+    for (auto it = check.beginName(); it != check.endName(); ++it) check.readGrid(it.gridName());
+    check.close();
+  } catch (const std::exception& e) {
+    std::string reason = e.what();
+    std::replace(reason.begin(), reason.end(), '\n', ' ');  // one error line
+    throw IoError(fmt::format("cannot write VDB file (disk full or file size limit?): {}", reason), path.string());
   }
   DeriveVdbUuidFromContent(atomic.temp_path());
   atomic.Commit();
