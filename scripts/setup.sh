@@ -13,6 +13,10 @@ PACKAGES=(
   slurm-wlm  # the farm test starts a single-node Slurm cluster on localhost (tests/farm)
 )
 
+PRESET="${1:-release}"
+# The fuzz preset builds with clang and links libFuzzer and the sanitizer runtimes.
+[ "$PRESET" = fuzz ] && PACKAGES+=(clang libclang-rt-14-dev)
+
 missing=()
 for p in "${PACKAGES[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
@@ -25,6 +29,5 @@ if ((${#missing[@]})); then
   DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
 fi
 
-PRESET="${1:-release}"
 cmake --preset "$PRESET" >/dev/null
 cmake --build --preset "$PRESET"

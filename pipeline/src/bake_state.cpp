@@ -1,6 +1,10 @@
 #include "bake_state.h"
 
+#include <fmt/format.h>
+
 #include <fstream>
+#include <stdexcept>
+#include <type_traits>
 #include <nlohmann/json.hpp>
 
 #include "rime/core/atomic_file.h"
@@ -28,8 +32,17 @@ JobRecord ParseRecord(const json& j) {
 }
 
 json StampJson(const FileStamp& s) { return {{"size", s.size}, {"mtime_ns", s.mtime_ns}, {"hash", s.hash}}; }
+// get<integer>() casts a floating-point value, undefined behaviour when it is out of range.
+template <class T>
+T IntegerField(const json& j, const char* key) {
+  const json& value = j.at(key);
+  if (!value.is_number_integer() || (std::is_unsigned_v<T> && !value.is_number_unsigned()))
+    throw std::runtime_error(fmt::format("'{}' is not an integer", key));
+  return value.get<T>();
+}
+
 FileStamp ParseStamp(const json& f) {
-  return FileStamp{f.at("size").get<std::uint64_t>(), f.at("mtime_ns").get<std::int64_t>(), f.at("hash").get<std::string>()};
+  return FileStamp{IntegerField<std::uint64_t>(f, "size"), IntegerField<std::int64_t>(f, "mtime_ns"), f.at("hash").get<std::string>()};
 }
 
 }  // namespace

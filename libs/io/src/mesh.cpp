@@ -307,6 +307,12 @@ TriMesh ReadPly(const fs::path& path, const std::string& data) {
     const bool is_face = e.name == "face";
     const VertexLayout layout(e);
     const int face_list = is_face ? std::max(e.Find("vertex_indices"), e.Find("vertex_index")) : -1;
+    // Every entry with a property takes at least one byte of the file: a larger count is corrupt,
+    // and would otherwise size the vertex arrays beyond memory.
+    if (!e.properties.empty() && e.count > std::size_t(c.end - c.p))
+      throw InputError(fmt::format("PLY element '{}' claims {} entries, more than the {} bytes left in the file", e.name, e.count,
+                                   std::size_t(c.end - c.p)),
+                       file);
     if (is_vertex) {
       if (layout.position[0] < 0 || layout.position[1] < 0 || layout.position[2] < 0)
         throw InputError("PLY vertex element lacks x, y or z", file);
@@ -317,6 +323,7 @@ TriMesh ReadPly(const fs::path& path, const std::string& data) {
     }
     if (is_face && face_list < 0) throw InputError("PLY face element lacks a vertex_indices list", file);
     if (is_face && !have_vertices) throw InputError("PLY face element comes before the vertex element", file);
+    if (e.properties.empty()) continue;  // nothing to read, however many it claims
     std::vector<double> values(e.properties.size());
     std::vector<std::uint32_t> polygon;
 
@@ -343,8 +350,12 @@ TriMesh ReadPly(const fs::path& path, const std::string& data) {
           const std::size_t size = PlyTypeSize(prop.count_type);
           if (std::size_t(c.end - c.p) < size)
             throw InputError(fmt::format("truncated binary PLY: file ends inside {} {} of {}", e.name, i, e.count), file);
-          n = (long long)ReadBinary(c.p, prop.count_type);
+          const double count = ReadBinary(c.p, prop.count_type);
           c.p += size;
+          // Checked before the cast: a float count type can hold values no integer can.
+          if (!(count >= 0 && count <= double(c.end - c.p)))
+            throw InputError(fmt::format("list length {} out of range (file ends sooner)", count), where());
+          n = (long long)count;
         } else {
           c.SkipSpaces();
           if (!c.Integer(n)) throw InputError("expected a list length", where());

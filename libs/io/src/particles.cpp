@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <cerrno>
+#include <cmath>
 #include <cstring>
 #include <type_traits>
 
@@ -111,11 +112,20 @@ void WriteDataset(hid_t group, const std::string& name, const std::vector<T>& va
 
 bool HasAttribute(hid_t object, const char* name) { return H5Aexists(object, name) > 0; }
 
+// H5Aread writes every element of the attribute: one value is read into one value's memory.
+void RequireScalar(hid_t attr, const char* name, const fs::path& file) {
+  Handle space(H5Aget_space(attr), H5Sclose);
+  if (!space.valid() || H5Sget_simple_extent_npoints(space) != 1)
+    throw InputError(fmt::format("attribute '{}' is not a single value (corrupt file)", name), file.string());
+}
+
 double ReadNumberAttribute(hid_t object, const char* name, const fs::path& file) {
   Handle attr(H5Aopen(object, name, H5P_DEFAULT), H5Aclose);
   double value = 0;
-  if (!attr.valid() || H5Aread(attr, H5T_NATIVE_DOUBLE, &value) < 0)
-    throw InputError(fmt::format("missing or unreadable attribute '{}'", name), file.string());
+  if (!attr.valid()) throw InputError(fmt::format("missing attribute '{}'", name), file.string());
+  RequireScalar(attr, name, file);
+  if (H5Aread(attr, H5T_NATIVE_DOUBLE, &value) < 0)
+    throw InputError(fmt::format("unreadable attribute '{}'", name), file.string());
   return value;
 }
 
@@ -124,6 +134,7 @@ std::string ReadStringAttribute(hid_t object, const char* name, const fs::path& 
   if (!attr.valid()) throw InputError(fmt::format("missing attribute '{}'", name), file.string());
   Handle type(H5Aget_type(attr), H5Tclose);
   if (H5Tget_class(type) != H5T_STRING) throw InputError(fmt::format("attribute '{}' is not a string", name), file.string());
+  RequireScalar(attr, name, file);
   if (H5Tis_variable_str(type) > 0) {
     char* value = nullptr;
     Handle memtype(H5Tcopy(H5T_C_S1), H5Tclose);
@@ -133,7 +144,12 @@ std::string ReadStringAttribute(hid_t object, const char* name, const fs::path& 
     H5free_memory(value);
     return s;
   }
-  std::string s(H5Tget_size(type), '\0');
+  // Fixed-size strings are stored whole in the file: a size beyond it is corrupt, not an allocation to try.
+  std::error_code ec;
+  const std::size_t size = H5Tget_size(type);
+  if (size == 0 || size > fs::file_size(file, ec))
+    throw InputError(fmt::format("attribute '{}' claims {} bytes, more than the file holds (corrupt file)", name, size), file.string());
+  std::string s(size, '\0');
   if (H5Aread(attr, type, s.data()) < 0) throw InputError(fmt::format("unreadable attribute '{}'", name), file.string());
   s.erase(std::find(s.begin(), s.end(), '\0'), s.end());
   return s;
@@ -174,7 +190,7 @@ void ReadHeader(hid_t file, const fs::path& path, std::string_view expected_kind
   if (format != kParticleFormatName)
     throw InputError(fmt::format("wrong format '{}' (expected '{}')", format, kParticleFormatName), path.string());
   const double version = ReadNumberAttribute(file, "version", path);
-  if (version > kParticleFormatVersion || version < 1)
+  if (!(version >= 1 && version <= kParticleFormatVersion))  // NaN too
     throw InputError(fmt::format("unsupported format version {} (this build reads version {}{})", version, kParticleFormatVersion,
                                  version > kParticleFormatVersion ? "; written by a newer Rime" : ""),
                      path.string());
@@ -182,7 +198,10 @@ void ReadHeader(hid_t file, const fs::path& path, std::string_view expected_kind
   if (!expected_kind.empty() && frame.kind != expected_kind)
     throw InputError(fmt::format("file holds '{}' particles, expected '{}'", frame.kind, expected_kind), path.string());
   frame.time = ReadNumberAttribute(file, "time", path);
-  frame.frame = static_cast<std::int64_t>(ReadNumberAttribute(file, "frame", path));
+  const double frame_number = ReadNumberAttribute(file, "frame", path);
+  if (!(std::abs(frame_number) < 1e15))  // also refuses NaN, whose cast to an integer is undefined
+    throw InputError(fmt::format("frame number {} out of range (corrupt file)", frame_number), path.string());
+  frame.frame = static_cast<std::int64_t>(frame_number);
   frame.spacing = ReadNumberAttribute(file, "spacing", path);
   frame.particle_radius = ReadNumberAttribute(file, "particle_radius", path);
   frame.rest_density = ReadNumberAttribute(file, "rest_density", path);
@@ -190,7 +209,7 @@ void ReadHeader(hid_t file, const fs::path& path, std::string_view expected_kind
   frame.source = path.string();
   const hsize_t count = [&] {
     H5O_info_t info;
-    H5Oget_info2(file, &info, H5O_INFO_NUM_ATTRS);
+    if (H5Oget_info2(file, &info, H5O_INFO_NUM_ATTRS) < 0) throw InputError("unreadable root attributes (corrupt file)", path.string());
     return info.num_attrs;
   }();
   for (hsize_t a = 0; a < count; ++a) {
@@ -198,6 +217,7 @@ void ReadHeader(hid_t file, const fs::path& path, std::string_view expected_kind
     if (H5Aget_name_by_idx(file, ".", H5_INDEX_NAME, H5_ITER_INC, a, name, sizeof name, H5P_DEFAULT) < 0) continue;
     if (IsReserved(name)) continue;
     Handle attr(H5Aopen(file, name, H5P_DEFAULT), H5Aclose);
+    if (!attr.valid()) throw InputError(fmt::format("unreadable attribute '{}' (corrupt file)", name), path.string());
     Handle type(H5Aget_type(attr), H5Tclose);
     if (H5Tget_class(type) == H5T_STRING)
       frame.texts[name] = ReadStringAttribute(file, name, path);
@@ -230,6 +250,13 @@ ParticleFrame Read(const fs::path& path, std::string_view expected_kind, bool wi
     const H5T_class_t type_class = H5Tget_class(type);
     const std::size_t bytes = H5Tget_size(type);
     const bool is_signed = type_class == H5T_INTEGER && H5Tget_sign(type) == H5T_SGN_2;
+    // Values come from the file's storage, at most deflate's ratio (about 1000:1) larger than the
+    // file: a count beyond that is corrupt and would only exhaust memory.
+    std::error_code ec;
+    const double most = 1100.0 * double(fs::file_size(path, ec));
+    if (n > 0 && (bytes == 0 || H5Dget_storage_size(dataset) == 0 || double(n) * double(bytes) > most))
+      throw InputError(fmt::format("dataset 'Step#0/{}' claims {} values, more than the file holds (corrupt file)", name, n),
+                       path.string());
     if (type_class == H5T_FLOAT && bytes == 4)
       frame.attributes[name] = ReadDataset<float>(dataset, n, name, path);
     else if (type_class == H5T_FLOAT && bytes == 8)
@@ -378,8 +405,8 @@ void WriteParticleFrame(const fs::path& path, const ParticleFrame& frame, const 
     Handle group(H5Gcreate2(file, kStepGroup, H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT), H5Gclose);
     if (!group.valid()) Check(-1, "group Step#0", path);
     WriteNumberAttribute(group, "TimeValue", H5T_NATIVE_DOUBLE, &frame.time, path);
-    for (const auto& [name, data] : frame.attributes)
-      std::visit([&](const auto& values) { WriteDataset(group, name, values, options, path); }, data);
+    for (const auto& attribute : frame.attributes)  // not a structured binding: clang 14 cannot capture one
+      std::visit([&](const auto& values) { WriteDataset(group, attribute.first, values, options, path); }, attribute.second);
     group.Close();
     if (H5Fflush(file, H5F_SCOPE_GLOBAL) < 0 || file.Close() < 0) Check(-1, "file contents", path);
   }

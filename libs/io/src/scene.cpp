@@ -2,9 +2,10 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <cmath>
 #include <fstream>
-#include <sstream>
+#include <numbers>
 #include <toml++/toml.h>
 
 #include "rime/core/error.h"
@@ -69,7 +70,15 @@ SolidObject ParseSolid(TomlReader& t, std::size_t index) {
   return s;
 }
 
-FluidBlock ParseBlock(TomlReader& t) {
+// Particles at spacing d_p in `volume`; refused above kMaxSceneParticles naming `key`.
+void CheckParticleCount(TomlReader& t, const std::string& key, double volume, double spacing, const char* what) {
+  const double count = volume / (spacing * spacing * spacing);
+  if (!(count <= kMaxSceneParticles))
+    t.Fail(key, fmt::format("{} would hold about {:.3g} particles at [water] spacing {:g} m, more than {:g} (use a larger "
+                            "spacing or a smaller {})", what, count, spacing, kMaxSceneParticles, what));
+}
+
+FluidBlock ParseBlock(TomlReader& t, double spacing) {
   FluidBlock b;
   b.shape = t.String("shape", b.shape, {"box", "sphere"});
   b.min = t.Vector("min", b.min);
@@ -79,11 +88,17 @@ FluidBlock ParseBlock(TomlReader& t) {
   b.center = t.Vector("center", b.center);
   b.radius = t.Number("radius", b.radius, Range::Positive());
   b.velocity = t.Vector("velocity", b.velocity);
+  if (b.shape == "box") {
+    const Vec3d extent = b.max - b.min;
+    CheckParticleCount(t, "max", extent.x * extent.y * extent.z, spacing, "water block");
+  } else {
+    CheckParticleCount(t, "radius", 4.0 / 3.0 * std::numbers::pi * b.radius * b.radius * b.radius, spacing, "water block");
+  }
   t.RejectUnknownKeys();
   return b;
 }
 
-Emitter ParseEmitter(TomlReader& t) {
+Emitter ParseEmitter(TomlReader& t, double spacing, double end_time) {
   Emitter e;
   e.shape = t.String("shape", e.shape, {"disc", "rectangle"});
   e.center = t.Vector("center", e.center);
@@ -96,6 +111,10 @@ Emitter ParseEmitter(TomlReader& t) {
   e.start = t.Number("start", e.start, Range::NonNegative());
   e.stop = t.Number("stop", e.stop, Range::NonNegative());
   if (e.stop <= e.start) t.Fail("stop", "emitter stop time must be after its start time");
+  // Water emitted until the stop time or the end of the scene, whichever comes first.
+  const double area = e.shape == "disc" ? std::numbers::pi * e.radius * e.radius : e.width * e.height;
+  const double duration = std::max(0.0, std::min(e.stop, end_time) - e.start);
+  CheckParticleCount(t, e.shape == "disc" ? "radius" : "width", area * e.speed * duration, spacing, "emitter");
   t.RejectUnknownKeys();
   return e;
 }
@@ -146,6 +165,9 @@ std::int64_t Scene::FrameCount() const { return static_cast<std::int64_t>(std::f
 
 Scene ParseScene(const std::string& text, const fs::path& file) {
   const std::string name = file.string();
+  if (text.size() > kMaxSceneFileBytes)
+    throw InputError(fmt::format("scene file of {} bytes, larger than the limit of {} bytes", text.size(), kMaxSceneFileBytes), name);
+  CheckTomlLimits(text, name);
   toml::table root;
   try {
     root = toml::parse(text, name);
@@ -165,6 +187,9 @@ Scene ParseScene(const std::string& text, const fs::path& file) {
     scene.info.end_time = t.Number("end_time", scene.info.end_time, Range::Positive());
     scene.info.quality = t.String("quality", "", {"preview", "production", "reference"});
     scene.info.method = t.String("method", scene.info.method, {"rime", "im2013"});
+    if (!(scene.info.end_time * scene.info.fps <= double(kMaxSceneFrames)))
+      t.Fail("end_time", fmt::format("end_time {:g} s at {:g} fps makes {:.3g} frames, more than {}", scene.info.end_time,
+                                     scene.info.fps, scene.info.end_time * scene.info.fps, kMaxSceneFrames));
     t.RejectUnknownKeys();
   }
   ApplyQualityPreset(scene.info.quality, scene);
@@ -281,8 +306,9 @@ Scene ParseScene(const std::string& text, const fs::path& file) {
     for (std::size_t b = a + 1; b < scene.solids.size(); ++b)
       if (scene.solids[a].name == scene.solids[b].name)
         throw InputError(fmt::format("two solids are named '{}'", scene.solids[a].name), name + ": solid.name");
-  for (TomlReader& t : top.TableArray("water_block")) scene.fluid_blocks.push_back(ParseBlock(t));
-  for (TomlReader& t : top.TableArray("emitter")) scene.emitters.push_back(ParseEmitter(t));
+  for (TomlReader& t : top.TableArray("water_block")) scene.fluid_blocks.push_back(ParseBlock(t, scene.fluid.spacing));
+  for (TomlReader& t : top.TableArray("emitter"))
+    scene.emitters.push_back(ParseEmitter(t, scene.fluid.spacing, scene.info.end_time));
   {
     TomlReader t = top.Table("surface");
     ParseSurfaceSettings(t, scene.surface);
@@ -302,11 +328,16 @@ Scene ParseScene(const std::string& text, const fs::path& file) {
 Scene LoadScene(const fs::path& file) {
   std::error_code ec;
   if (!fs::exists(file, ec)) throw InputError("scene file not found", file.string());
+  // Checked before reading, so that a huge file costs no memory.
+  const std::uintmax_t size = fs::file_size(file, ec);
+  if (ec) throw InputError("cannot read scene file", file.string());
+  if (size > kMaxSceneFileBytes)
+    throw InputError(fmt::format("scene file of {} bytes, larger than the limit of {} bytes", size, kMaxSceneFileBytes), file.string());
   std::ifstream in(file, std::ios::binary);
   if (!in) throw InputError("cannot read scene file", file.string());
-  std::stringstream buffer;
-  buffer << in.rdbuf();
-  return ParseScene(buffer.str(), file);
+  std::string text(size, '\0');
+  if (!in.read(text.data(), std::streamsize(size))) throw InputError("cannot read scene file", file.string());
+  return ParseScene(text, file);
 }
 
 }  // namespace rime::io

@@ -4,12 +4,16 @@
 
 #include <algorithm>
 #include <cmath>
+#include <vector>
 #include <fmt/ranges.h>
 #include <toml++/toml.h>
 
 #include "rime/core/error.h"
 
 namespace rime::io {
+namespace {
+bool IsBlankChar(char c) { return c == ' ' || c == '\t' || c == '\r'; }
+}  // namespace
 
 bool Range::Contains(double v) const {
   if (!std::isfinite(v)) return false;
@@ -24,6 +28,138 @@ std::string Range::Describe() const {
   if (has_min) return fmt::format("{} {}", min_exclusive ? ">" : ">=", min);
   if (has_max) return fmt::format("{} {}", max_exclusive ? "<" : "<=", max);
   return "a finite number";
+}
+
+void CheckTomlLimits(std::string_view text, const std::string& file) {
+  // Depths are upper bounds of what the parser would build: every bracket, header segment and
+  // dotted-key segment counts as one level; strings and comments are skipped.
+  struct Open {
+    char kind;  // '[' array, '{' inline table
+    int depth;  // depth of what it holds
+  };
+  std::vector<Open> open;
+  const std::size_t n = text.size();
+  std::size_t line = 1;
+  int table_depth = 0;      // depth of the current [table] or [[array]]
+  std::string table_name;   // its name, for messages
+  bool in_key = true;       // reading a key: at a statement start, after '{', or after ',' in an inline table
+  int key_segments = 0;     // dots read in the current key
+  int value_depth = 0;      // depth of the value being read
+  std::string key;          // the current key as written, for messages
+  const auto fail = [&](const std::string& what, std::size_t at_line) {
+    const std::string field = table_name.empty() ? key : (key.empty() ? table_name : table_name + "." + key);
+    throw InputError(what, fmt::format("{}:{}: {}", file, at_line, field.empty() ? "(top level)" : field));
+  };
+  const auto check_depth = [&](int depth) {
+    if (depth > kMaxTomlDepth) fail(fmt::format("tables or arrays nested deeper than {} levels", kMaxTomlDepth), line);
+  };
+  const auto base = [&] { return open.empty() ? table_depth : open.back().depth; };
+  const auto start_key = [&] {
+    in_key = true;
+    key_segments = 0;
+    key.clear();
+  };
+  // Skips the string starting at text[i]; returns the index of its last character (or of the
+  // character before an unterminated single-line string's newline, which the main loop counts).
+  const auto skip_string = [&](std::size_t i) {
+    const char quote = text[i];
+    const bool basic = quote == '"';
+    const bool multi = i + 2 < n && text[i + 1] == quote && text[i + 2] == quote;
+    const std::size_t first_line = line;
+    std::size_t j = i + (multi ? 3 : 1);
+    const std::size_t start = j;
+    for (; j < n; ++j) {
+      const char c = text[j];
+      if (basic && c == '\\') {
+        if (++j < n && text[j] == '\n') ++line;
+        continue;
+      }
+      if (c == '\n') {
+        if (!multi) break;
+        ++line;
+        continue;
+      }
+      if (c == quote && (!multi || (j + 2 < n && text[j + 1] == quote && text[j + 2] == quote))) break;
+    }
+    if (j - start > kMaxTomlString)
+      fail(fmt::format("string of {} bytes, longer than the limit of {} bytes", j - start, kMaxTomlString), first_line);
+    if (j >= n) return n - 1;
+    if (text[j] == '\n') return j - 1;
+    if (multi) {
+      j += 2;
+      for (int extra = 0; extra < 2 && j + 1 < n && text[j + 1] == quote; ++extra) ++j;  // """a"""" holds a"
+    }
+    return j;
+  };
+
+  for (std::size_t i = 0; i < n; ++i) {
+    const char c = text[i];
+    if (c == '\n') {
+      ++line;
+      if (open.empty()) start_key();
+      continue;
+    }
+    if (c == '#') {
+      const std::size_t eol = text.find('\n', i);
+      if (eol == std::string_view::npos) break;
+      i = eol - 1;
+      continue;
+    }
+    if (c == '"' || c == '\'') {
+      const std::size_t end = skip_string(i);
+      if (in_key) key.append(text.substr(i, end + 1 - i));
+      i = end;
+      continue;
+    }
+    if (in_key) {
+      if (c == '[' && open.empty() && key.empty()) {  // [table] or [[array of tables]]
+        const bool array = i + 1 < n && text[i + 1] == '[';
+        table_name.clear();
+        key.clear();
+        table_depth = array ? 2 : 1;
+        for (i += array ? 2 : 1; i < n && text[i] != ']' && text[i] != '\n'; ++i) {
+          if (text[i] == '"' || text[i] == '\'') {
+            const std::size_t end = skip_string(i);
+            table_name.append(text.substr(i, end + 1 - i));
+            i = end;
+            continue;
+          }
+          if (text[i] == '.') check_depth(++table_depth);
+          if (!IsBlankChar(text[i])) table_name += text[i];
+        }
+        if (i < n && text[i] == '\n') --i;
+        else if (array && i + 1 < n && text[i + 1] == ']') ++i;
+        in_key = false;
+        continue;
+      }
+      if (c == '.') check_depth(base() + ++key_segments + 1);
+      if (c == '=') {
+        in_key = false;
+        value_depth = base() + key_segments + 1;
+        continue;
+      }
+      if (c == '}' && !open.empty()) {  // an empty inline table, or a trailing comma
+        open.pop_back();
+        in_key = false;
+        continue;
+      }
+      if (!IsBlankChar(c)) key += c;
+      continue;
+    }
+    if (c == '[') {
+      open.push_back({'[', ++value_depth});
+      check_depth(value_depth);
+    } else if (c == '{') {
+      open.push_back({'{', value_depth});
+      check_depth(value_depth);
+      start_key();
+    } else if (c == ']' || c == '}') {
+      if (!open.empty()) open.pop_back();
+      if (!open.empty() && open.back().kind == '[') value_depth = open.back().depth;
+    } else if (c == ',' && !open.empty() && open.back().kind == '{') {
+      start_key();
+    }
+  }
 }
 
 TomlReader::TomlReader(const toml::table& table, std::string file, std::string path)

@@ -5,6 +5,7 @@
 /// (ranges, enum values, unknown keys) and throws rime::Error naming `file:line: field`.
 #pragma once
 
+#include <cstdint>
 #include <filesystem>
 #include <set>
 #include <string>
@@ -179,6 +180,12 @@ struct Scene {
   std::filesystem::path Resolve(const std::filesystem::path& p) const;
   std::int64_t FrameCount() const;  // output frames after frame 0
 };
+
+/// Bounds far beyond any bake this project runs, so that a typo (spacing 1e-9, end_time 1e9) is
+/// refused at load time instead of exhausting memory or disk hours later.
+inline constexpr double kMaxSceneParticles = 1e9;      // per water block or emitter, at [water] spacing
+inline constexpr std::int64_t kMaxSceneFrames = 1'000'000;  // end_time * fps
+inline constexpr std::uintmax_t kMaxSceneFileBytes = std::uintmax_t(1) << 28;  // 256 MiB
 
 /// Names accepted in `[simulation] modules = [...]`.
 const std::vector<std::string>& KnownModules();

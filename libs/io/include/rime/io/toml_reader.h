@@ -9,6 +9,7 @@
 #include <optional>
 #include <set>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "rime/core/math.h"
@@ -32,6 +33,13 @@ struct Range {
   bool Contains(double v) const;
   std::string Describe() const;
 };
+
+/// Refuses TOML text nested deeper than kMaxTomlDepth tables/arrays or holding a string longer than
+/// kMaxTomlString bytes, in one linear pass before parsing: toml++ recurses once per dotted-key
+/// segment and overflows the stack near 1e5 levels. Throws rime::Error naming `file:line: key`.
+inline constexpr int kMaxTomlDepth = 64;
+inline constexpr std::size_t kMaxTomlString = 1 << 20;
+void CheckTomlLimits(std::string_view text, const std::string& file);
 
 class TomlReader {
  public:
