@@ -27,6 +27,7 @@ void Synchronize(const Device& device);
 template <class T>
 class DeviceArray {
  public:
+  using value_type = T;
   DeviceArray() = default;
   explicit DeviceArray(const Device& device, std::size_t n = 0) : device_(device) { resize(n); }
   DeviceArray(const Device& device, const std::vector<T>& host) : device_(device) { assign(host); }

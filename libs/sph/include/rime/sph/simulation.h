@@ -24,6 +24,8 @@
 
 namespace rime::sph {
 
+class Enclosure;
+
 /// Wall-clock seconds spent in each part of the step (accumulated).
 struct StepTimings {
   double neighbor_search = 0, non_pressure = 0, pressure_solve = 0, integration = 0, freezing = 0, other = 0;
@@ -84,8 +86,9 @@ class Simulation {
   const ModuleRegistry& modules() const { return modules_; }
   const StepTimings& timings() const { return timings_; }
   void EnableTimings(bool on) { timing_enabled_ = on; }
-  /// Bytes of particle and neighbor arrays currently allocated.
-  std::size_t MemoryBytes() const;
+  /// Bytes of particle and neighbor arrays currently allocated, of every module or of one
+  /// ("core", "freezing", "surface_tension").
+  std::size_t MemoryBytes(const std::string& module = {}) const;
 
   // Host copies for tests and tools (slow: copies from the device).
   std::vector<Vec3<T>> Positions() const;
@@ -101,7 +104,9 @@ class Simulation {
   /// Overwrites fluid positions/velocities (tests). Sizes must match fluid_count().
   void SetFluidState(const std::vector<Vec3<T>>& x, const std::vector<Vec3<T>>& v);
 
+  /// The particle groups (src/state.h), for tests that check them against frames.
   struct State;
+  const State& state() const { return *state_; }
 
  private:
   void NeighborSearch();
@@ -109,6 +114,9 @@ class Simulation {
   void NonPressureAccelerations(double dt);
   StepStats SolvePressure(double dt, double omega);
   void Integrate(double dt);
+  void SeedWater(const Enclosure& enclosure);
+  // Replaces the water with these particles (new ids, every other attribute at its fill value).
+  void SetWater(const std::vector<Vec3<T>>& x, const std::vector<Vec3<T>>& v);
   void RemoveOutsideDomain(StepStats& stats);
   void Emit(double dt, StepStats& stats);
   void UpdateBoundaryMotion(double t);

@@ -1,0 +1,351 @@
+/// @file state.h
+/// @brief The solver's particle state as attribute groups (attributes.h), each declaring its
+/// arrays once: water (persistent and per step), boundary, and the modules' own groups, which
+/// exist only while their module is on. Private to libs/sph.
+#pragma once
+
+#include <optional>
+#include <vector>
+
+#include "attributes.h"
+#include "rime/io/scene.h"
+#include "rime/neighbors/grid.h"
+#include "rime/sph/modules.h"
+#include "rime/sph/motion.h"
+#include "rime/sph/simulation.h"
+
+namespace rime::sph {
+
+using exec::DeviceArray;
+
+/// Water state carried from step to step and in frames; reordered with the particles.
+template <class T>
+struct FluidState {
+  static constexpr const char* kModule = "core";
+  explicit FluidState(const exec::Device& d) : x(d), v(d), id(d), pressure(d), density(d) {}
+  DeviceArray<Vec3<T>> x, v;
+  DeviceArray<std::int64_t> id;
+  DeviceArray<T> pressure;  // of the last step: the next solve's warm start
+  DeviceArray<T> density;   // of the last step; the rest density until the first step
+
+  template <class F> void ForEach(F&& f) { Visit(*this, f); }
+  template <class F> void ForEach(F&& f) const { Visit(*this, f); }
+  template <class Self, class F>
+  static void Visit(Self& s, F& f) {
+    f(AttributeInfo{.name = "", .checkpointed = true, .names = Names::kXyz}, s.x);
+    f(AttributeInfo{.name = "v", .checkpointed = true, .names = Names::kXyz}, s.v);
+    f(AttributeInfo{.name = "id", .checkpointed = true}, s.id);
+    f(AttributeInfo{.name = "pressure", .checkpointed = true}, s.pressure);
+    f(AttributeInfo{.name = "density", .checkpointed = true, .fill = Fill::kRestDensity}, s.density);
+  }
+};
+
+/// Water quantities computed within one step (sized, not reordered, by the step).
+template <class T>
+struct FluidStep {
+  static constexpr const char* kModule = "core";
+  explicit FluidStep(const exec::Device& d)
+      : v_adv(d), accel(d), d_ii(d), s(d), density_error(d), pressure(d), pressure_next(d), advected_error(d), a_ii(d),
+        compression(d), scratch(d) {}
+  DeviceArray<Vec3<T>> v_adv, accel, d_ii, s;
+  DeviceArray<T> density_error, pressure, pressure_next, advected_error, a_ii, compression, scratch;
+
+  template <class F> void ForEach(F&& f) { Visit(*this, f); }
+  template <class F> void ForEach(F&& f) const { Visit(*this, f); }
+  template <class Self, class F>
+  static void Visit(Self& s, F& f) {
+    f(AttributeInfo{.name = "advected_velocity"}, s.v_adv);
+    f(AttributeInfo{.name = "acceleration"}, s.accel);
+    f(AttributeInfo{.name = "d_ii"}, s.d_ii);
+    f(AttributeInfo{.name = "displacement_sum"}, s.s);
+    f(AttributeInfo{.name = "density_error"}, s.density_error);
+    f(AttributeInfo{.name = "pressure_iterate"}, s.pressure);
+    f(AttributeInfo{.name = "pressure_next"}, s.pressure_next);
+    f(AttributeInfo{.name = "advected_density_error"}, s.advected_error);
+    f(AttributeInfo{.name = "a_ii"}, s.a_ii);
+    f(AttributeInfo{.name = "compression"}, s.compression);
+    f(AttributeInfo{.name = "scratch"}, s.scratch);
+  }
+};
+
+/// He 2014 surface tension: colour field and its energy, per step.
+template <class T>
+struct SurfaceColorField {
+  static constexpr const char* kModule = "surface_tension";
+  explicit SurfaceColorField(const exec::Device& d) : color(d), energy(d) {}
+  DeviceArray<T> color, energy;
+
+  template <class F> void ForEach(F&& f) { Visit(*this, f); }
+  template <class F> void ForEach(F&& f) const { Visit(*this, f); }
+  template <class Self, class F>
+  static void Visit(Self& s, F& f) {
+    f(AttributeInfo{.name = "color"}, s.color);
+    f(AttributeInfo{.name = "color_energy"}, s.energy);
+  }
+};
+
+/// Akinci 2013 surface tension: surface normals, per step.
+template <class T>
+struct SurfaceNormals {
+  static constexpr const char* kModule = "surface_tension";
+  explicit SurfaceNormals(const exec::Device& d) : normal(d) {}
+  DeviceArray<Vec3<T>> normal;
+
+  template <class F> void ForEach(F&& f) { Visit(*this, f); }
+  template <class F> void ForEach(F&& f) const { Visit(*this, f); }
+  template <class Self, class F>
+  static void Visit(Self& s, F& f) {
+    f(AttributeInfo{.name = "surface_normal"}, s.normal);
+  }
+};
+
+/// Boundary particles: the solids of the boundary files, then ice in the order it froze. Written
+/// to frames (and read back) only with freezing on: otherwise the boundary files are the state.
+template <class T>
+struct BoundaryState {
+  static constexpr const char* kModule = "core";
+  explicit BoundaryState(const exec::Device& d) : x(d), v(d), local(d), object(d), phase(d), id(d), volume(d), psi(d) {}
+  DeviceArray<Vec3<T>> x, v;
+  DeviceArray<Vec3<T>> local;  // rest-pose position on its object
+  DeviceArray<std::uint32_t> object;
+  DeviceArray<std::uint8_t> phase;
+  DeviceArray<std::int64_t> id;
+  DeviceArray<T> volume;  // Akinci V_b, as the run has it (updated near new ice only)
+  DeviceArray<T> psi;     // Ψ_b = ρ0 V_b
+
+  template <class F> void ForEach(F&& f) { Visit(*this, f); }
+  template <class F> void ForEach(F&& f) const { Visit(*this, f); }
+  template <class Self, class F>
+  static void Visit(Self& s, F& f) {
+    f(AttributeInfo{.name = "", .checkpointed = true, .names = Names::kXyz}, s.x);
+    f(AttributeInfo{.name = "v", .checkpointed = true, .names = Names::kXyz}, s.v);
+    f(AttributeInfo{.name = "local", .checkpointed = true}, s.local);
+    f(AttributeInfo{.name = "object_id", .checkpointed = true}, s.object);
+    f(AttributeInfo{.name = "phase", .checkpointed = true}, s.phase);
+    f(AttributeInfo{.name = "id", .checkpointed = true}, s.id);
+    f(AttributeInfo{.name = "volume", .checkpointed = true}, s.volume);
+    f(AttributeInfo{.name = "psi"}, s.psi);
+  }
+};
+
+/// Freezing state of boundary particles: the water film on solids and ice, and what ice keeps.
+template <class T>
+struct FreezingBoundary {
+  static constexpr const char* kModule = "freezing";
+  explicit FreezingBoundary(const exec::Device& d) : film(d), growth(d), growth_valid(d), ice_kind(d), ice_time(d), ice_d(d) {}
+  DeviceArray<T> film;  // Γ/Γ_max
+  DeviceArray<Vec3<T>> growth;
+  DeviceArray<std::uint8_t> growth_valid;
+  DeviceArray<std::uint8_t> ice_kind;  // freeze::IceKind; 0 for solids
+  DeviceArray<double> ice_time;        // creation time, s
+  DeviceArray<freeze::Sym6<T>> ice_d;  // anisotropy D frozen with the particle
+
+  template <class F> void ForEach(F&& f) { Visit(*this, f); }
+  template <class F> void ForEach(F&& f) const { Visit(*this, f); }
+  template <class Self, class F>
+  static void Visit(Self& s, F& f) {
+    f(AttributeInfo{.name = "water_film", .checkpointed = true}, s.film);
+    f(AttributeInfo{.name = "growth_dir", .checkpointed = true}, s.growth);
+    f(AttributeInfo{.name = "growth_valid", .checkpointed = true}, s.growth_valid);
+    f(AttributeInfo{.name = "ice_kind", .checkpointed = true}, s.ice_kind);
+    f(AttributeInfo{.name = "ice_time", .checkpointed = true}, s.ice_time);
+    f(AttributeInfo{.name = "anisotropy", .checkpointed = true}, s.ice_d);
+  }
+};
+
+/// Nucleation delay (freezing.freeze_delay > 0): seconds each water particle spent above a
+/// freezing threshold; persistent, so it moves with the water.
+template <class T>
+struct FreezingFluid {
+  static constexpr const char* kModule = "freezing";
+  explicit FreezingFluid(const exec::Device& d) : contact_time(d) {}
+  DeviceArray<T> contact_time;
+
+  template <class F> void ForEach(F&& f) { Visit(*this, f); }
+  template <class F> void ForEach(F&& f) const { Visit(*this, f); }
+  template <class Self, class F>
+  static void Visit(Self& s, F& f) {
+    f(AttributeInfo{.name = "contact_time", .checkpointed = true}, s.contact_time);
+  }
+};
+
+/// Per-step work arrays of the freezing step (sized by it: water, boundary or list lengths).
+template <class T>
+struct FreezingStep {
+  static constexpr const char* kModule = "freezing";
+  explicit FreezingStep(const exec::Device& d)
+      : fluid_d(d), fluid_flag(d), boundary_active(d), active_list(d), decision(d), trigger(d), frozen(d), wet(d), region(d),
+        region_list(d), energy_solid(d), energy_ice(d), laplacian(d), lambda(d), active_x(d), bf(d) {}
+  DeviceArray<freeze::Sym6<T>> fluid_d;  // water: anisotropy D of this step
+  DeviceArray<std::uint32_t> fluid_flag, boundary_active, active_list, decision, trigger, frozen, wet, region, region_list;
+  DeviceArray<T> energy_solid, energy_ice, laplacian, lambda;
+  DeviceArray<Vec3<T>> active_x;
+  neighbors::NeighborList bf;  // boundary–fluid pairs of the boundary particles touching water
+
+  template <class F> void ForEach(F&& f) { Visit(*this, f); }
+  template <class F> void ForEach(F&& f) const { Visit(*this, f); }
+  template <class Self, class F>
+  static void Visit(Self& s, F& f) {
+    f(AttributeInfo{.name = "fluid_anisotropy"}, s.fluid_d);
+    f(AttributeInfo{.name = "fluid_flag"}, s.fluid_flag);
+    f(AttributeInfo{.name = "boundary_active"}, s.boundary_active);
+    f(AttributeInfo{.name = "active_list"}, s.active_list);
+    f(AttributeInfo{.name = "decision"}, s.decision);
+    f(AttributeInfo{.name = "trigger"}, s.trigger);
+    f(AttributeInfo{.name = "frozen"}, s.frozen);
+    f(AttributeInfo{.name = "wet"}, s.wet);
+    f(AttributeInfo{.name = "region"}, s.region);
+    f(AttributeInfo{.name = "region_list"}, s.region_list);
+    f(AttributeInfo{.name = "energy_solid"}, s.energy_solid);
+    f(AttributeInfo{.name = "energy_ice"}, s.energy_ice);
+    f(AttributeInfo{.name = "film_laplacian"}, s.laplacian);
+    f(AttributeInfo{.name = "film_lambda"}, s.lambda);
+    f(AttributeInfo{.name = "active_positions"}, s.active_x);
+    f(AttributeInfo{.name = "bf_offsets"}, s.bf.offsets);
+    f(AttributeInfo{.name = "bf_indices"}, s.bf.indices);
+  }
+};
+
+/// Pairs of the water's neighborhoods and their kernel values, rebuilt every step.
+template <class T>
+struct Neighborhoods {
+  static constexpr const char* kModule = "core";
+  explicit Neighborhoods(const exec::Device& d) : ff(d), fb(d), ff_w(d), fb_w(d), ff_grad(d), fb_grad(d) {}
+  neighbors::NeighborList ff, fb;
+  DeviceArray<T> ff_w, fb_w;
+  DeviceArray<Vec3<T>> ff_grad, fb_grad;
+
+  template <class F> void ForEach(F&& f) { Visit(*this, f); }
+  template <class F> void ForEach(F&& f) const { Visit(*this, f); }
+  template <class Self, class F>
+  static void Visit(Self& s, F& f) {
+    f(AttributeInfo{.name = "ff_offsets"}, s.ff.offsets);
+    f(AttributeInfo{.name = "ff_indices"}, s.ff.indices);
+    f(AttributeInfo{.name = "fb_offsets"}, s.fb.offsets);
+    f(AttributeInfo{.name = "fb_indices"}, s.fb.indices);
+    f(AttributeInfo{.name = "ff_w"}, s.ff_w);
+    f(AttributeInfo{.name = "fb_w"}, s.fb_w);
+    f(AttributeInfo{.name = "ff_grad"}, s.ff_grad);
+    f(AttributeInfo{.name = "fb_grad"}, s.fb_grad);
+  }
+};
+
+/// Creates `group` when its module is on and `wanted` holds, recording its attributes.
+template <class Group>
+void AllocateIf(std::optional<Group>& group, const exec::Device& device, ModuleRegistry& modules, bool wanted = true) {
+  if (!wanted || !modules.Enabled(Group::kModule)) return;
+  group.emplace(device);
+  group->ForEach([&](const AttributeInfo& a, const auto&) { modules.RecordAttribute(Group::kModule, a.name); });
+}
+
+template <class T>
+struct Simulation<T>::State {
+  State(const exec::Device& d, const io::Scene& scene, ModuleRegistry& modules)
+      : fluid(d), step(d), boundary(d), pairs(d), pool(d), fluid_grid(d), boundary_grid(d), motions(d), keep(d), slot(d), order(d) {
+    AllocateIf(color_field, d, modules, scene.surface_tension.model != "akinci2013");
+    AllocateIf(normals, d, modules, scene.surface_tension.model == "akinci2013");
+    AllocateIf(freezing, d, modules);
+    AllocateIf(freezing_fluid, d, modules, scene.freezing.freeze_delay > 0);
+    AllocateIf(freezing_step, d, modules);
+  }
+
+  FluidState<T> fluid;
+  FluidStep<T> step;
+  std::optional<SurfaceColorField<T>> color_field;
+  std::optional<SurfaceNormals<T>> normals;
+  BoundaryState<T> boundary;
+  std::optional<FreezingBoundary<T>> freezing;
+  std::optional<FreezingFluid<T>> freezing_fluid;
+  std::optional<FreezingStep<T>> freezing_step;
+  Neighborhoods<T> pairs;
+  ScratchPool pool;  // reorder buffers
+
+  neighbors::UniformGrid<T> fluid_grid, boundary_grid;
+  // Objects.
+  std::vector<ObjectMotion> object_motions;  // index = object id
+  std::vector<Vec3d> initial_normals;        // host, from the boundary files (zero when absent); used once by Initialize
+  DeviceArray<RigidMotion<T>> motions;
+  bool any_animated = false;
+  // Compaction.
+  DeviceArray<std::uint32_t> keep, slot, order;
+  std::int64_t ice_count = 0;
+
+  /// Calls f(group) for every water group that exists (they share the particle order).
+  template <class F>
+  void ForEachFluidGroup(F&& f) {
+    f(fluid);
+    if (freezing_fluid) f(*freezing_fluid);
+  }
+  template <class F>
+  void ForEachFluidGroup(F&& f) const {
+    f(fluid);
+    if (freezing_fluid) f(*freezing_fluid);
+  }
+  template <class F>
+  void ForEachBoundaryGroup(F&& f) {
+    f(boundary);
+    if (freezing) f(*freezing);
+  }
+  template <class F>
+  void ForEachBoundaryGroup(F&& f) const {
+    f(boundary);
+    if (freezing) f(*freezing);
+  }
+
+  /// Calls f(module, group) for every group that exists.
+  template <class F>
+  void ForEachGroup(F&& f) const {
+    f(FluidState<T>::kModule, fluid);
+    f(FluidStep<T>::kModule, step);
+    f(BoundaryState<T>::kModule, boundary);
+    f(Neighborhoods<T>::kModule, pairs);
+    if (color_field) f(SurfaceColorField<T>::kModule, *color_field);
+    if (normals) f(SurfaceNormals<T>::kModule, *normals);
+    if (freezing) f(FreezingBoundary<T>::kModule, *freezing);
+    if (freezing_fluid) f(FreezingFluid<T>::kModule, *freezing_fluid);
+    if (freezing_step) f(FreezingStep<T>::kModule, *freezing_step);
+  }
+
+  /// Keeps the water particles order[0..count) in that order.
+  void GatherFluid(const exec::Device& device, Index count) {
+    ForEachFluidGroup([&](auto& group) { Gather(device, group, order.data(), count, pool); });
+  }
+
+  Index n() const { return static_cast<Index>(fluid.x.size()); }
+  Index nb() const { return static_cast<Index>(boundary.x.size()); }
+  Pairs<T> FF() const { return {pairs.ff.offsets.data(), pairs.ff.indices.data(), pairs.ff_w.data(), pairs.ff_grad.data()}; }
+  Pairs<T> FB() const { return {pairs.fb.offsets.data(), pairs.fb.indices.data(), pairs.fb_w.data(), pairs.fb_grad.data()}; }
+};
+
+}  // namespace rime::sph
+
+namespace rime::sph {
+
+template <class T>
+Vec3<T> ToT(const Vec3d& v) {
+  return {T(v.x), T(v.y), T(v.z)};
+}
+
+/// Where a scene value came from, for error messages: "file: field", or the field alone for scenes
+/// built in code.
+inline std::string SceneField(const io::Scene& scene, const std::string& field) {
+  return scene.file.empty() ? field : scene.file.string() + ": " + field;
+}
+
+/// Indices i < n with flags[i] != 0, in increasing order; returns their count.
+inline Index ListFlagged(const exec::Device& device, const DeviceArray<std::uint32_t>& flags, Index n, DeviceArray<std::uint32_t>& slot,
+                         DeviceArray<std::uint32_t>& list) {
+  slot.resize(n);
+  const Index count = static_cast<Index>(exec::ExclusiveScan(device, flags.data(), slot.data(), n));
+  list.resize(count);
+  if (count) exec::ParallelFor(device, n, kernels::CompactionOrder{flags.data(), slot.data(), list.data()});
+  return count;
+}
+
+/// Copies `values` into `array` from element `first` on.
+template <class V>
+void CopyTail(const exec::Device& device, DeviceArray<V>& array, std::size_t first, const std::vector<V>& values) {
+  if (!values.empty()) exec::CopyToDevice(device, array.data() + first, values.data(), values.size() * sizeof(V));
+}
+
+}  // namespace rime::sph
