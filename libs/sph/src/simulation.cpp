@@ -128,12 +128,12 @@ void Simulation<T>::AddBoundaryObject(const io::ParticleFrame& boundary, const s
   const std::size_t first = s.boundary.x.size(), m = positions.size();
   std::vector<std::int64_t> ids(m);
   for (std::size_t i = 0; i < m; ++i) ids[i] = -static_cast<std::int64_t>(first + i) - 1;
-  s.ForEachBoundaryGroup([&](auto& group) { Grow(device_, group, m, scene_.fluid.rest_density); });
-  CopyTail(device_, s.boundary.x, first, positions);
-  CopyTail(device_, s.boundary.local, first, positions);
-  CopyTail(device_, s.boundary.object, first, std::vector<std::uint32_t>(m, object));
-  CopyTail(device_, s.boundary.phase, first, std::vector<std::uint8_t>(m, static_cast<std::uint8_t>(io::Phase::kBoundary)));
-  CopyTail(device_, s.boundary.id, first, ids);
+  s.ForEachBoundaryGroup([&](auto& group) { exec::GrowGroup(device_, group, m, scene_.fluid.rest_density); });
+  exec::CopyTail(device_, s.boundary.x, first, positions);
+  exec::CopyTail(device_, s.boundary.local, first, positions);
+  exec::CopyTail(device_, s.boundary.object, first, std::vector<std::uint32_t>(m, object));
+  exec::CopyTail(device_, s.boundary.phase, first, std::vector<std::uint8_t>(m, static_cast<std::uint8_t>(io::Phase::kBoundary)));
+  exec::CopyTail(device_, s.boundary.id, first, ids);
 }
 
 template <class T>
@@ -198,8 +198,8 @@ void Simulation<T>::Initialize() {
     DeviceArray<std::uint32_t> d_order(device_);
     d_order.resize(s.nb());
     exec::CopyOnDevice(device_, d_order.data(), s.boundary_grid.order(), s.nb() * sizeof(std::uint32_t));
-    ScratchPool once(device_);  // freed here: the boundary is reordered only now
-    s.ForEachBoundaryGroup([&](auto& group) { Gather(device_, group, d_order.data(), s.nb(), once); });
+    exec::ScratchPool once(device_);  // freed here: the boundary is reordered only now
+    s.ForEachBoundaryGroup([&](auto& group) { exec::GatherGroup(device_, group, d_order.data(), s.nb(), once); });
     s.boundary_grid.AdoptOrder(s.boundary.x.data());
     RecomputeBoundaryVolumes();
   } else {
@@ -358,7 +358,7 @@ std::size_t Simulation<T>::MemoryBytes(const std::string& module) const {
   const State& s = *state_;
   std::size_t bytes = 0;
   s.ForEachGroup([&](const std::string& owner, const auto& group) {
-    if (module.empty() || owner == module) bytes += Bytes(group);
+    if (module.empty() || owner == module) bytes += exec::GroupBytes(group);
   });
   if (module.empty() || module == "core") bytes += s.pool.bytes() + s.keep.bytes() + s.slot.bytes() + s.order.bytes();
   return bytes;

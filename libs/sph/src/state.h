@@ -1,13 +1,15 @@
 /// @file state.h
-/// @brief The solver's particle state as attribute groups (attributes.h), each declaring its
-/// arrays once: water (persistent and per step), boundary, and the modules' own groups, which
-/// exist only while their module is on. Private to libs/sph.
+/// @brief The solver's particle state as attribute groups (rime/exec/attributes.h), each declaring
+/// its arrays once: water (persistent and per step), boundary, and the modules' own groups (the
+/// freezing groups are libs/freeze's), which exist only while their module is on. Private to libs/sph.
 #pragma once
 
 #include <optional>
 #include <vector>
 
-#include "attributes.h"
+#include "frame_rows.h"
+#include "rime/exec/attributes.h"
+#include "rime/freeze/freezing.h"
 #include "rime/io/scene.h"
 #include "rime/neighbors/grid.h"
 #include "rime/sph/modules.h"
@@ -17,6 +19,11 @@
 namespace rime::sph {
 
 using exec::DeviceArray;
+using exec::Names;
+using exec::ScratchPool;
+using freeze::FreezingBoundary;
+using freeze::FreezingFluid;
+using freeze::FreezingWork;
 
 /// Water state carried from step to step and in frames; reordered with the particles.
 template <class T>
@@ -128,84 +135,6 @@ struct BoundaryState {
   }
 };
 
-/// Freezing state of boundary particles: the water film on solids and ice, and what ice keeps.
-template <class T>
-struct FreezingBoundary {
-  static constexpr const char* kModule = "freezing";
-  explicit FreezingBoundary(const exec::Device& d) : film(d), growth(d), growth_valid(d), ice_kind(d), ice_time(d), ice_d(d) {}
-  DeviceArray<T> film;  // Γ/Γ_max
-  DeviceArray<Vec3<T>> growth;
-  DeviceArray<std::uint8_t> growth_valid;
-  DeviceArray<std::uint8_t> ice_kind;  // freeze::IceKind; 0 for solids
-  DeviceArray<double> ice_time;        // creation time, s
-  DeviceArray<freeze::Sym6<T>> ice_d;  // anisotropy D frozen with the particle
-
-  template <class F> void ForEach(F&& f) { Visit(*this, f); }
-  template <class F> void ForEach(F&& f) const { Visit(*this, f); }
-  template <class Self, class F>
-  static void Visit(Self& s, F& f) {
-    f(AttributeInfo{.name = "water_film", .checkpointed = true}, s.film);
-    f(AttributeInfo{.name = "growth_dir", .checkpointed = true}, s.growth);
-    f(AttributeInfo{.name = "growth_valid", .checkpointed = true}, s.growth_valid);
-    f(AttributeInfo{.name = "ice_kind", .checkpointed = true}, s.ice_kind);
-    f(AttributeInfo{.name = "ice_time", .checkpointed = true}, s.ice_time);
-    f(AttributeInfo{.name = "anisotropy", .checkpointed = true}, s.ice_d);
-  }
-};
-
-/// Nucleation delay (freezing.freeze_delay > 0): seconds each water particle spent above a
-/// freezing threshold; persistent, so it moves with the water.
-template <class T>
-struct FreezingFluid {
-  static constexpr const char* kModule = "freezing";
-  explicit FreezingFluid(const exec::Device& d) : contact_time(d) {}
-  DeviceArray<T> contact_time;
-
-  template <class F> void ForEach(F&& f) { Visit(*this, f); }
-  template <class F> void ForEach(F&& f) const { Visit(*this, f); }
-  template <class Self, class F>
-  static void Visit(Self& s, F& f) {
-    f(AttributeInfo{.name = "contact_time", .checkpointed = true}, s.contact_time);
-  }
-};
-
-/// Per-step work arrays of the freezing step (sized by it: water, boundary or list lengths).
-template <class T>
-struct FreezingStep {
-  static constexpr const char* kModule = "freezing";
-  explicit FreezingStep(const exec::Device& d)
-      : fluid_d(d), fluid_flag(d), boundary_active(d), active_list(d), decision(d), trigger(d), frozen(d), wet(d), region(d),
-        region_list(d), energy_solid(d), energy_ice(d), laplacian(d), lambda(d), active_x(d), bf(d) {}
-  DeviceArray<freeze::Sym6<T>> fluid_d;  // water: anisotropy D of this step
-  DeviceArray<std::uint32_t> fluid_flag, boundary_active, active_list, decision, trigger, frozen, wet, region, region_list;
-  DeviceArray<T> energy_solid, energy_ice, laplacian, lambda;
-  DeviceArray<Vec3<T>> active_x;
-  neighbors::NeighborList bf;  // boundary–fluid pairs of the boundary particles touching water
-
-  template <class F> void ForEach(F&& f) { Visit(*this, f); }
-  template <class F> void ForEach(F&& f) const { Visit(*this, f); }
-  template <class Self, class F>
-  static void Visit(Self& s, F& f) {
-    f(AttributeInfo{.name = "fluid_anisotropy"}, s.fluid_d);
-    f(AttributeInfo{.name = "fluid_flag"}, s.fluid_flag);
-    f(AttributeInfo{.name = "boundary_active"}, s.boundary_active);
-    f(AttributeInfo{.name = "active_list"}, s.active_list);
-    f(AttributeInfo{.name = "decision"}, s.decision);
-    f(AttributeInfo{.name = "trigger"}, s.trigger);
-    f(AttributeInfo{.name = "frozen"}, s.frozen);
-    f(AttributeInfo{.name = "wet"}, s.wet);
-    f(AttributeInfo{.name = "region"}, s.region);
-    f(AttributeInfo{.name = "region_list"}, s.region_list);
-    f(AttributeInfo{.name = "energy_solid"}, s.energy_solid);
-    f(AttributeInfo{.name = "energy_ice"}, s.energy_ice);
-    f(AttributeInfo{.name = "film_laplacian"}, s.laplacian);
-    f(AttributeInfo{.name = "film_lambda"}, s.lambda);
-    f(AttributeInfo{.name = "active_positions"}, s.active_x);
-    f(AttributeInfo{.name = "bf_offsets"}, s.bf.offsets);
-    f(AttributeInfo{.name = "bf_indices"}, s.bf.indices);
-  }
-};
-
 /// Pairs of the water's neighborhoods and their kernel values, rebuilt every step.
 template <class T>
 struct Neighborhoods {
@@ -246,7 +175,7 @@ struct Simulation<T>::State {
     AllocateIf(normals, d, modules, scene.surface_tension.model == "akinci2013");
     AllocateIf(freezing, d, modules);
     AllocateIf(freezing_fluid, d, modules, scene.freezing.freeze_delay > 0);
-    AllocateIf(freezing_step, d, modules);
+    AllocateIf(freezing_work, d, modules);
   }
 
   FluidState<T> fluid;
@@ -256,7 +185,7 @@ struct Simulation<T>::State {
   BoundaryState<T> boundary;
   std::optional<FreezingBoundary<T>> freezing;
   std::optional<FreezingFluid<T>> freezing_fluid;
-  std::optional<FreezingStep<T>> freezing_step;
+  std::optional<FreezingWork<T>> freezing_work;
   Neighborhoods<T> pairs;
   ScratchPool pool;  // reorder buffers
 
@@ -303,12 +232,12 @@ struct Simulation<T>::State {
     if (normals) f(SurfaceNormals<T>::kModule, *normals);
     if (freezing) f(FreezingBoundary<T>::kModule, *freezing);
     if (freezing_fluid) f(FreezingFluid<T>::kModule, *freezing_fluid);
-    if (freezing_step) f(FreezingStep<T>::kModule, *freezing_step);
+    if (freezing_work) f(FreezingWork<T>::kModule, *freezing_work);
   }
 
   /// Keeps the water particles order[0..count) in that order.
   void GatherFluid(const exec::Device& device, Index count) {
-    ForEachFluidGroup([&](auto& group) { Gather(device, group, order.data(), count, pool); });
+    ForEachFluidGroup([&](auto& group) { exec::GatherGroup(device, group, order.data(), count, pool); });
   }
 
   Index n() const { return static_cast<Index>(fluid.x.size()); }
@@ -330,22 +259,6 @@ Vec3<T> ToT(const Vec3d& v) {
 /// built in code.
 inline std::string SceneField(const io::Scene& scene, const std::string& field) {
   return scene.file.empty() ? field : scene.file.string() + ": " + field;
-}
-
-/// Indices i < n with flags[i] != 0, in increasing order; returns their count.
-inline Index ListFlagged(const exec::Device& device, const DeviceArray<std::uint32_t>& flags, Index n, DeviceArray<std::uint32_t>& slot,
-                         DeviceArray<std::uint32_t>& list) {
-  slot.resize(n);
-  const Index count = static_cast<Index>(exec::ExclusiveScan(device, flags.data(), slot.data(), n));
-  list.resize(count);
-  if (count) exec::ParallelFor(device, n, kernels::CompactionOrder{flags.data(), slot.data(), list.data()});
-  return count;
-}
-
-/// Copies `values` into `array` from element `first` on.
-template <class V>
-void CopyTail(const exec::Device& device, DeviceArray<V>& array, std::size_t first, const std::vector<V>& values) {
-  if (!values.empty()) exec::CopyToDevice(device, array.data() + first, values.data(), values.size() * sizeof(V));
 }
 
 }  // namespace rime::sph

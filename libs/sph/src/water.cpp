@@ -99,7 +99,7 @@ void Simulation<T>::SetWater(const std::vector<Vec3<T>>& x, const std::vector<Ve
   State& s = *state_;
   std::vector<std::int64_t> ids(x.size());
   for (auto& id : ids) id = next_id_++;
-  s.ForEachFluidGroup([&](auto& group) { Reset(device_, group, x.size(), scene_.fluid.rest_density); });
+  s.ForEachFluidGroup([&](auto& group) { exec::ResetGroup(device_, group, x.size(), scene_.fluid.rest_density); });
   s.fluid.x.assign(x);
   s.fluid.v.assign(v);
   s.fluid.id.assign(ids);
@@ -113,7 +113,7 @@ void Simulation<T>::RemoveOutsideDomain(StepStats& stats) {
   s.keep.resize(n);
   s.slot.resize(n);
   exec::ParallelFor(device_, n, kernels::InsideDomain<T>{.x = s.fluid.x.data(), .lo = domain_min_, .hi = domain_max_, .keep = s.keep.data()});
-  const Index kept = ListFlagged(device_, s.keep, n, s.slot, s.order);
+  const Index kept = exec::ListFlagged(device_, s.keep, n, s.slot, s.order);
   if (kept == n) return;
   s.GatherFluid(device_, kept);
   stats.removed_particles = n - kept;
@@ -154,10 +154,10 @@ void Simulation<T>::Emit(double dt, StepStats& stats) {
   const Index n = s.n(), m = Index(new_x.size());
   std::vector<std::int64_t> ids(m);
   for (auto& id : ids) id = next_id_++;
-  s.ForEachFluidGroup([&](auto& group) { Grow(device_, group, m, scene_.fluid.rest_density); });
-  CopyTail(device_, s.fluid.x, n, new_x);
-  CopyTail(device_, s.fluid.v, n, new_v);
-  CopyTail(device_, s.fluid.id, n, ids);
+  s.ForEachFluidGroup([&](auto& group) { exec::GrowGroup(device_, group, m, scene_.fluid.rest_density); });
+  exec::CopyTail(device_, s.fluid.x, n, new_x);
+  exec::CopyTail(device_, s.fluid.v, n, new_v);
+  exec::CopyTail(device_, s.fluid.id, n, ids);
   stats.emitted_particles = m;
 }
 

@@ -15,6 +15,7 @@
 #include "rime/core/kernel.h"
 #include "rime/core/math.h"
 #include "rime/exec/kernel_list.h"
+#include "rime/exec/kernels.h"
 #include "rime/freeze/kernels.h"
 #include "rime/neighbors/grid_kernels.h"
 
@@ -529,15 +530,6 @@ struct MoveBoundary {
   }
 };
 
-/// dst[i] = src[order[i]] (reordering along the grid's Z curve, compaction).
-template <class V>
-struct Gather {
-  const V* src;
-  const std::uint32_t* order;
-  V* dst;
-  RIME_HD void operator()(Index i) const { dst[i] = src[order[i]]; }
-};
-
 /// keep[i] = 1 when x_i is finite and inside the domain box.
 template <class T>
 struct InsideDomain {
@@ -561,20 +553,10 @@ struct MarkListed {
   }
 };
 
-/// For every kept i: order[slot[i]] = i (slot = exclusive scan of keep): the compaction map.
-struct CompactionOrder {
-  const std::uint32_t* keep;
-  const std::uint32_t* slot;
-  std::uint32_t* order;
-  RIME_HD void operator()(Index i) const {
-    if (keep[i]) order[slot[i]] = static_cast<std::uint32_t>(i);
-  }
-};
-
 }  // namespace kernels
 }  // namespace rime::sph
 
-// Kernels of both precisions; Gather for every attribute type that is reordered.
+// Kernels of both precisions; Gather of the anisotropy (exec lists the other attribute types).
 #define RIME_SPH_KERNELS_T(X, T)                                                                                   \
   X(rime::sph::kernels::PairValues<T>) X(rime::sph::kernels::Density<T>) X(rime::sph::kernels::Compression<T>) X(rime::sph::kernels::InitAcceleration<T>) \
   X(rime::sph::kernels::ViscosityAcceleration<T>) X(rime::sph::kernels::SurfaceColor<T>)                           \
@@ -584,9 +566,7 @@ struct CompactionOrder {
   X(rime::sph::kernels::PredictAdvection<T>) X(rime::sph::kernels::DisplacementSum<T>)                             \
   X(rime::sph::kernels::PressureUpdate<T>) X(rime::sph::kernels::IntegratePressure<T>)                             \
   X(rime::sph::kernels::SquaredSpeed<T>) X(rime::sph::kernels::Heights<T>) X(rime::sph::kernels::CapIceVolume<T>) X(rime::sph::kernels::Scale<T>) X(rime::sph::kernels::MoveBoundary<T>) X(rime::sph::kernels::InsideDomain<T>) \
-  X(rime::sph::kernels::Gather<T>) X(rime::sph::kernels::Gather<rime::Vec3<T>>) X(rime::sph::kernels::Gather<rime::freeze::Sym6<T>>)
+  X(rime::exec::Gather<rime::freeze::Sym6<T>>)
 
 #define RIME_SPH_KERNELS(X)                                                                        \
-  RIME_SPH_KERNELS_T(X, float) RIME_SPH_KERNELS_T(X, double) X(rime::sph::kernels::CompactionOrder) X(rime::sph::kernels::MarkListed) \
-  X(rime::sph::kernels::Gather<std::int64_t>) X(rime::sph::kernels::Gather<std::uint32_t>)          \
-  X(rime::sph::kernels::Gather<std::uint8_t>)
+  RIME_SPH_KERNELS_T(X, float) RIME_SPH_KERNELS_T(X, double) X(rime::sph::kernels::MarkListed)

@@ -12,7 +12,7 @@
 ///   DeviceArray<Vec3<T>> x;
 ///   template <class F> void ForEach(F&& f) { f(AttributeInfo{.name = "", .names = Names::kXyz}, x); }
 /// };
-/// Grow(group, 10); Gather(device, group, order, count, pool); std::size_t b = Bytes(group);
+/// GrowGroup(device, group, 10, rho0); GatherGroup(device, group, order, count, pool); GroupBytes(group);
 /// @endcode
 #pragma once
 
@@ -26,13 +26,11 @@
 #include <vector>
 
 #include "rime/core/math.h"
+#include "rime/exec/kernels.h"
 #include "rime/exec/memory.h"
 #include "rime/exec/parallel.h"
-#include "rime/freeze/kernels.h"
-#include "rime/io/particles.h"
-#include "rime/sph/kernels.h"
 
-namespace rime::sph {
+namespace rime::exec {
 
 /// How the components of a vector attribute are named in frames.
 enum class Names : std::uint8_t {
@@ -51,7 +49,8 @@ struct AttributeInfo {
   Fill fill = Fill::kZero;
 };
 
-/// Component access for the element types of attributes: scalars, Vec3 and symmetric 3x3.
+/// Component access for the element types of attributes: scalars and Vec3 here; a library with its
+/// own element type specialises it next to that type.
 template <class V>
 struct Components {
   using Scalar = V;
@@ -66,14 +65,6 @@ struct Components<Vec3<S>> {
   static Scalar Get(const Vec3<S>& v, int c) { return v[c]; }
   static void Set(Vec3<S>& v, int c, Scalar s) { v[c] = s; }
 };
-template <class S>
-struct Components<freeze::Sym6<S>> {
-  using Scalar = S;
-  static constexpr int kCount = 6;
-  static Scalar Get(const freeze::Sym6<S>& v, int c) { return v.c[c]; }
-  static void Set(freeze::Sym6<S>& v, int c, Scalar s) { v.c[c] = s; }
-};
-
 /// Dataset name of component c of an attribute with `count` components.
 inline std::string ColumnName(const AttributeInfo& a, int c, int count) {
   if (count == 1) return a.name;
@@ -84,9 +75,9 @@ inline std::string ColumnName(const AttributeInfo& a, int c, int count) {
 /// Reorder buffers, one per element type, reused from step to step.
 class ScratchPool {
  public:
-  explicit ScratchPool(const exec::Device& device) : device_(device) {}
+  explicit ScratchPool(const Device& device) : device_(device) {}
   template <class V>
-  exec::DeviceArray<V>& Get() {
+  DeviceArray<V>& Get() {
     std::unique_ptr<Base>& slot = arrays_[std::type_index(typeid(V))];
     if (!slot) slot = std::make_unique<Holder<V>>(device_);
     return static_cast<Holder<V>&>(*slot).array;
@@ -104,26 +95,26 @@ class ScratchPool {
   };
   template <class V>
   struct Holder : Base {
-    explicit Holder(const exec::Device& d) : array(d) {}
+    explicit Holder(const Device& d) : array(d) {}
     std::size_t bytes() const override { return array.bytes(); }
-    exec::DeviceArray<V> array;
+    DeviceArray<V> array;
   };
-  exec::Device device_;
+  Device device_;
   std::map<std::type_index, std::unique_ptr<Base>> arrays_;
 };
 
 template <class V>
-void Reorder(const exec::Device& device, exec::DeviceArray<V>& array, exec::DeviceArray<V>& scratch, const std::uint32_t* order, Index n) {
+void Reorder(const Device& device, DeviceArray<V>& array, DeviceArray<V>& scratch, const std::uint32_t* order, Index n) {
   scratch.resize(n);
-  exec::ParallelFor(device, n, kernels::Gather<V>{array.data(), order, scratch.data()});
+  ParallelFor(device, n, Gather<V>{array.data(), order, scratch.data()});
   array.swap(scratch);
 }
 
 template <class V>
-void FillValue(const exec::Device& device, exec::DeviceArray<V>& array, std::size_t from, const V& value) {
+void FillValue(const Device& device, DeviceArray<V>& array, std::size_t from, const V& value) {
   if (array.size() <= from) return;
   const std::vector<V> values(array.size() - from, value);
-  exec::CopyToDevice(device, array.data() + from, values.data(), values.size() * sizeof(V));
+  CopyToDevice(device, array.data() + from, values.data(), values.size() * sizeof(V));
 }
 
 /// The value `fill` stands for, as the element type V.
@@ -135,7 +126,7 @@ V FillOf(Fill fill, double rest_density) {
 
 /// Appends m particles to every array of the group, with the attribute's fill value.
 template <class Group>
-void Grow(const exec::Device& device, Group& group, std::size_t m, double rest_density) {
+void GrowGroup(const Device& device, Group& group, std::size_t m, double rest_density) {
   group.ForEach([&](const AttributeInfo& a, auto& array) {
     using V = typename std::decay_t<decltype(array)>::value_type;
     const std::size_t n = array.size();
@@ -146,7 +137,7 @@ void Grow(const exec::Device& device, Group& group, std::size_t m, double rest_d
 
 /// Resizes every array of the group to n particles, all with the attribute's fill value.
 template <class Group>
-void Reset(const exec::Device& device, Group& group, std::size_t n, double rest_density) {
+void ResetGroup(const Device& device, Group& group, std::size_t n, double rest_density) {
   group.ForEach([&](const AttributeInfo& a, auto& array) {
     using V = typename std::decay_t<decltype(array)>::value_type;
     array.resize(n);
@@ -157,7 +148,7 @@ void Reset(const exec::Device& device, Group& group, std::size_t n, double rest_
 
 /// Keeps the particles order[0..count) of the group, in that order.
 template <class Group>
-void Gather(const exec::Device& device, Group& group, const std::uint32_t* order, Index count, ScratchPool& pool) {
+void GatherGroup(const Device& device, Group& group, const std::uint32_t* order, Index count, ScratchPool& pool) {
   group.ForEach([&](const AttributeInfo&, auto& array) {
     using V = typename std::decay_t<decltype(array)>::value_type;
     Reorder(device, array, pool.Get<V>(), order, count);
@@ -165,47 +156,26 @@ void Gather(const exec::Device& device, Group& group, const std::uint32_t* order
 }
 
 template <class Group>
-std::size_t Bytes(const Group& group) {
+std::size_t GroupBytes(const Group& group) {
   std::size_t total = 0;
   group.ForEach([&](const AttributeInfo&, const auto& array) { total += array.bytes(); });
   return total;
 }
 
-/// Writes the checkpointed attributes of `group` into rows [first, first + group size) of `frame`,
-/// whose datasets have `rows` entries; a dataset another group created keeps its values elsewhere,
-/// a new one is filled with the attribute's fill value.
-template <class Group>
-void WriteRows(const Group& group, io::ParticleFrame& frame, std::size_t first, std::size_t rows, double rest_density) {
-  group.ForEach([&](const AttributeInfo& a, const auto& array) {
-    if (!a.checkpointed) return;
-    using V = typename std::decay_t<decltype(array)>::value_type;
-    using C = Components<V>;
-    using S = typename C::Scalar;
-    const std::vector<V> host = array.ToHost();
-    for (int c = 0; c < C::kCount; ++c) {
-      const std::string name = ColumnName(a, c, C::kCount);
-      if (!frame.Has(name)) frame.Set(name, std::vector<S>(rows, FillOf<S>(a.fill, rest_density)));
-      auto& column = std::get<std::vector<S>>(frame.attributes.at(name));
-      for (std::size_t i = 0; i < host.size(); ++i) column[first + i] = C::Get(host[i], c);
-    }
-  });
+/// Indices i < n with flags[i] != 0, in increasing order; returns their count.
+inline Index ListFlagged(const Device& device, const DeviceArray<std::uint32_t>& flags, Index n, DeviceArray<std::uint32_t>& slot,
+                         DeviceArray<std::uint32_t>& list) {
+  slot.resize(n);
+  const Index count = static_cast<Index>(ExclusiveScan(device, flags.data(), slot.data(), n));
+  list.resize(count);
+  if (count) ParallelFor(device, n, CompactionOrder{flags.data(), slot.data(), list.data()});
+  return count;
 }
 
-/// Sets every checkpointed attribute of `group` from the frame rows `rows`, in that order.
-template <class Group>
-void ReadRows(Group& group, const io::ParticleFrame& frame, const std::vector<std::size_t>& rows) {
-  group.ForEach([&](const AttributeInfo& a, auto& array) {
-    if (!a.checkpointed) return;
-    using V = typename std::decay_t<decltype(array)>::value_type;
-    using C = Components<V>;
-    using S = typename C::Scalar;
-    std::vector<V> host(rows.size());
-    for (int c = 0; c < C::kCount; ++c) {
-      const std::vector<S>& column = frame.Get<S>(ColumnName(a, c, C::kCount));
-      for (std::size_t i = 0; i < rows.size(); ++i) C::Set(host[i], c, column[rows[i]]);
-    }
-    array.assign(host);
-  });
+/// Copies `values` into `array` from element `first` on.
+template <class V>
+void CopyTail(const Device& device, DeviceArray<V>& array, std::size_t first, const std::vector<V>& values) {
+  if (!values.empty()) CopyToDevice(device, array.data() + first, values.data(), values.size() * sizeof(V));
 }
 
-}  // namespace rime::sph
+}  // namespace rime::exec

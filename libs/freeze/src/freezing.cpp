@@ -1,0 +1,141 @@
+/// @file freezing.cpp
+/// @brief The freezing step's order of operations (spec §11 step 8a–8e); see freezing.h.
+
+#include "rime/freeze/freezing.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "rime/core/kernel.h"
+#include "rime/exec/parallel.h"
+
+namespace rime::freeze {
+
+template <class T>
+FreezeParams<T> MakeFreezeParams(const io::Scene& scene) {
+  const io::FreezingSettings& f = scene.freezing;
+  FreezeParams<T> p{};
+  p.h = T(scene.fluid.smoothing_length());
+  p.mass = T(scene.fluid.particle_mass());
+  p.film_max = T(f.film_max_ratio * scene.fluid.particle_mass());
+  p.alpha_solid = T(f.alpha_solid);
+  p.alpha_ice = T(f.alpha_ice);
+  p.dt_ref = T(f.dt_ref);
+  p.glaze_threshold = T(f.glaze_threshold);
+  p.icicle_threshold = T(f.icicle_threshold);
+  p.growth_sign = T(f.growth_sign);
+  p.fr_clamp = f.fr_mode == "clamp";
+  p.ce_raw = f.ce_mode == "raw";
+  p.ce_sum = f.ce_aggregation == "sum";
+  p.isotropic = f.growth == "isotropic";
+  p.pca.k_s = T(f.k_s);
+  p.pca.k_r = T(f.k_r);
+  p.pca.k_n = T(f.k_n);
+  p.pca.n_eps = f.n_eps;
+  p.pca.s_min = T(f.s_min);
+  p.pca.s_max = T(f.s_max);
+  p.pca.center_on_particle = f.pca_center == "particle";
+  return p;
+}
+
+template <class T>
+Index FreezeStep(const exec::Device& device, const io::Scene& scene, const Particles<T>& particles, double dt, double& diffusion_pending,
+                 FreezingBoundary<T>& film, FreezingFluid<T>* clocks, FreezingWork<T>& work, DeviceArray<std::uint32_t>& keep,
+                 DeviceArray<std::uint32_t>& slot, DeviceArray<std::uint32_t>& frozen_list) {
+  const Index n = particles.n, nb = particles.nb;
+  const FreezeParams<T> p = MakeFreezeParams<T>(scene);
+  const CubicSpline<T> kernel(p.h);
+  const T support = kernel.SupportRadius();
+
+  // Who touches whom: fluid with boundary neighbors, and boundary particles with fluid neighbors
+  // (their B–F lists at the new positions, spec §11 step 8).
+  work.fluid_flag.resize(n);
+  work.boundary_active.resize(nb);
+  work.boundary_active.SetZero();
+  exec::ParallelFor(device, n,
+                    kernels::MarkContacts<T>{.fb_offsets = particles.fb->offsets.data(), .fb_index = particles.fb->indices.data(),
+                                        .fluid_flag = work.fluid_flag.data(), .boundary_active = work.boundary_active.data()});
+  const Index active = exec::ListFlagged(device, work.boundary_active, nb, slot, work.active_list);
+  work.active_x.resize(active);
+  exec::ParallelFor(device, active, exec::Gather<Vec3<T>>{particles.boundary_x, work.active_list.data(), work.active_x.data()});
+  particles.fluid_grid->Query(work.active_x.data(), active, support, false, work.bf);
+  exec::ParallelFor(device, active,
+                    kernels::MarkFluidFromBoundary{.bf_offsets = work.bf.offsets.data(), .bf_index = work.bf.indices.data(), .fluid_flag = work.fluid_flag.data()});
+
+  // 8a fluid anisotropy, 8b film transfer + 8d growth direction.
+  work.fluid_d.resize(n);
+  exec::ParallelFor(device, n,
+                    kernels::FluidAnisotropy<T>{.flag = work.fluid_flag.data(), .ff_offsets = particles.ff->offsets.data(), .ff_index = particles.ff->indices.data(),
+                                           .x = particles.x, .kernel = kernel, .params = p, .d = work.fluid_d.data()});
+  exec::ParallelFor(device, active,
+                    kernels::FilmAndGrowth<T>{.active = work.active_list.data(), .bf_offsets = work.bf.offsets.data(), .bf_index = work.bf.indices.data(),
+                                         .boundary_x = particles.boundary_x, .boundary_volume = particles.boundary_volume,
+                                         .boundary_phase = particles.boundary_phase, .x = particles.x, .v = particles.v,
+                                         .d = work.fluid_d.data(), .kernel = kernel, .params = p, .dt = T(dt), .film = film.film.data(),
+                                         .growth = film.growth.data(), .growth_valid = film.growth_valid.data()});
+  if (scene.freezing.drying_rate > 0)
+    exec::ParallelFor(device, nb, kernels::DryFilm<T>{.factor = T(std::exp(-scene.freezing.drying_rate * dt)), .film = film.film.data()});
+
+  // 8c film diffusion over the wet region and its one-ring. Operator splitting: the diffusion
+  // time accumulates until one explicit step of it would use half the stability budget (the
+  // plane reference λ h² ≈ 5, spec §9.3), then it is applied with its accumulated time step and
+  // sub-stepped if the actual λ_max needs it. At small Δt this saves most diffusion passes.
+  const double diffusivity = scene.freezing.film_diffusion * scene.fluid.spacing * scene.fluid.spacing / scene.freezing.dt_ref;
+  diffusion_pending += dt;
+  const double h = scene.fluid.smoothing_length();
+  if (diffusivity > 0 && diffusion_pending * diffusivity * 5.0 / (h * h) >= 0.5) {
+    const double dt_diffusion = diffusion_pending;
+    diffusion_pending = 0;
+    work.wet.resize(nb);
+    work.region.resize(nb);
+    work.region.SetZero();
+    exec::ParallelFor(device, nb, kernels::MarkWet<T>{.film = film.film.data(), .wet = work.wet.data()});
+    exec::ParallelFor(device, nb,
+                      kernels::DilateWet<T>{.grid = particles.boundary_grid->view(), .wet = work.wet.data(), .radius = support, .region = work.region.data()});
+    const Index region = exec::ListFlagged(device, work.region, nb, slot, work.region_list);
+    if (region > 0) {
+      work.laplacian.resize(region);
+      work.lambda.resize(region);
+      const kernels::FilmLaplacian<T> laplacian{.list = work.region_list.data(), .grid = particles.boundary_grid->view(), .volume = particles.boundary_volume,
+                                           .film = film.film.data(), .kernel = kernel, .epsilon = T(particles.viscosity_epsilon),
+                                           .laplacian = work.laplacian.data(), .lambda = work.lambda.data()};
+      exec::ParallelFor(device, region, laplacian);
+      const double lambda_max = exec::Max(device, work.lambda.data(), region);
+      const int substeps = std::max(1, int(std::ceil(dt_diffusion * diffusivity * lambda_max)));
+      for (int sub = 0; sub < substeps; ++sub) {
+        if (sub > 0) exec::ParallelFor(device, region, laplacian);
+        exec::ParallelFor(device, region,
+                          kernels::ApplyFilmDiffusion<T>{.list = work.region_list.data(), .laplacian = work.laplacian.data(),
+                                                    .step = T(dt_diffusion * diffusivity / substeps), .film = film.film.data()});
+      }
+    }
+  }
+
+  // 8e decisions from one snapshot, 8f conversions applied together.
+  for (auto* a : {&work.decision, &work.trigger, &keep, &work.frozen}) a->resize(n);
+  work.energy_solid.resize(n);
+  work.energy_ice.resize(n);
+  exec::ParallelFor(device, n,
+                    kernels::PhaseDecision<T>{.fb_offsets = particles.fb->offsets.data(), .fb_index = particles.fb->indices.data(), .x = particles.x,
+                                         .d = work.fluid_d.data(), .boundary_x = particles.boundary_x, .boundary_phase = particles.boundary_phase,
+                                         .film = film.film.data(), .growth = film.growth.data(), .growth_valid = film.growth_valid.data(),
+                                         .kernel = kernel, .params = p, .decision = work.decision.data(), .trigger = work.trigger.data(),
+                                         .energy_solid = work.energy_solid.data(), .energy_ice = work.energy_ice.data()});
+  if (clocks)
+    exec::ParallelFor(device, n,
+                      kernels::NucleationDelay<T>{.dt = T(dt), .delay = T(scene.freezing.freeze_delay), .decision = work.decision.data(),
+                                             .contact_time = clocks->contact_time.data()});
+  exec::ParallelFor(device, n, kernels::KeepUnfrozen{.decision = work.decision.data(), .keep = keep.data(), .frozen = work.frozen.data()});
+  return exec::ListFlagged(device, work.frozen, n, slot, frozen_list);
+}
+
+template FreezeParams<float> MakeFreezeParams<float>(const io::Scene&);
+template FreezeParams<double> MakeFreezeParams<double>(const io::Scene&);
+template Index FreezeStep<float>(const exec::Device&, const io::Scene&, const Particles<float>&, double, double&, FreezingBoundary<float>&,
+                                 FreezingFluid<float>*, FreezingWork<float>&, DeviceArray<std::uint32_t>&, DeviceArray<std::uint32_t>&,
+                                 DeviceArray<std::uint32_t>&);
+template Index FreezeStep<double>(const exec::Device&, const io::Scene&, const Particles<double>&, double, double&, FreezingBoundary<double>&,
+                                  FreezingFluid<double>*, FreezingWork<double>&, DeviceArray<std::uint32_t>&, DeviceArray<std::uint32_t>&,
+                                  DeviceArray<std::uint32_t>&);
+
+}  // namespace rime::freeze
