@@ -60,15 +60,18 @@ Index FreezeStep(const exec::Device& device, const io::Scene& scene, const Parti
   exec::ParallelFor(device, active, exec::Gather<Vec3<T>>{particles.boundary_x, work.active_list.data(), work.active_x.data()});
   particles.fluid_grid->Query(work.active_x.data(), active, support, false, work.bf);
   exec::ParallelFor(device, active,
-                    kernels::MarkFluidFromBoundary{.bf_offsets = work.bf.offsets.data(), .bf_index = work.bf.indices.data(), .fluid_flag = work.fluid_flag.data()});
+                    kernels::MarkFluidFromBoundary{.bf_offsets = work.bf.offsets.data(), .bf_index = work.bf.indices.data(),
+                                                   .fluid_flag = work.fluid_flag.data()});
 
   // 8a fluid anisotropy, 8b film transfer + 8d growth direction.
   work.fluid_d.resize(n);
   exec::ParallelFor(device, n,
-                    kernels::FluidAnisotropy<T>{.flag = work.fluid_flag.data(), .ff_offsets = particles.ff->offsets.data(), .ff_index = particles.ff->indices.data(),
+                    kernels::FluidAnisotropy<T>{.flag = work.fluid_flag.data(), .ff_offsets = particles.ff->offsets.data(),
+                                                .ff_index = particles.ff->indices.data(),
                                            .x = particles.x, .kernel = kernel, .params = p, .d = work.fluid_d.data()});
   exec::ParallelFor(device, active,
-                    kernels::FilmAndGrowth<T>{.active = work.active_list.data(), .bf_offsets = work.bf.offsets.data(), .bf_index = work.bf.indices.data(),
+                    kernels::FilmAndGrowth<T>{.active = work.active_list.data(), .bf_offsets = work.bf.offsets.data(),
+                                              .bf_index = work.bf.indices.data(),
                                          .boundary_x = particles.boundary_x, .boundary_volume = particles.boundary_volume,
                                          .boundary_phase = particles.boundary_phase, .x = particles.x, .v = particles.v,
                                          .d = work.fluid_d.data(), .kernel = kernel, .params = p, .dt = T(dt), .film = film.film.data(),
@@ -91,12 +94,14 @@ Index FreezeStep(const exec::Device& device, const io::Scene& scene, const Parti
     work.region.SetZero();
     exec::ParallelFor(device, nb, kernels::MarkWet<T>{.film = film.film.data(), .wet = work.wet.data()});
     exec::ParallelFor(device, nb,
-                      kernels::DilateWet<T>{.grid = particles.boundary_grid->view(), .wet = work.wet.data(), .radius = support, .region = work.region.data()});
+                      kernels::DilateWet<T>{.grid = particles.boundary_grid->view(), .wet = work.wet.data(), .radius = support,
+                                            .region = work.region.data()});
     const Index region = exec::ListFlagged(device, work.region, nb, slot, work.region_list);
     if (region > 0) {
       work.laplacian.resize(region);
       work.lambda.resize(region);
-      const kernels::FilmLaplacian<T> laplacian{.list = work.region_list.data(), .grid = particles.boundary_grid->view(), .volume = particles.boundary_volume,
+      const kernels::FilmLaplacian<T> laplacian{.list = work.region_list.data(), .grid = particles.boundary_grid->view(),
+                                                .volume = particles.boundary_volume,
                                            .film = film.film.data(), .kernel = kernel, .epsilon = T(particles.viscosity_epsilon),
                                            .laplacian = work.laplacian.data(), .lambda = work.lambda.data()};
       exec::ParallelFor(device, region, laplacian);
@@ -116,7 +121,8 @@ Index FreezeStep(const exec::Device& device, const io::Scene& scene, const Parti
   work.energy_solid.resize(n);
   work.energy_ice.resize(n);
   exec::ParallelFor(device, n,
-                    kernels::PhaseDecision<T>{.fb_offsets = particles.fb->offsets.data(), .fb_index = particles.fb->indices.data(), .x = particles.x,
+                    kernels::PhaseDecision<T>{.fb_offsets = particles.fb->offsets.data(), .fb_index = particles.fb->indices.data(),
+                                              .x = particles.x,
                                          .d = work.fluid_d.data(), .boundary_x = particles.boundary_x, .boundary_phase = particles.boundary_phase,
                                          .film = film.film.data(), .growth = film.growth.data(), .growth_valid = film.growth_valid.data(),
                                          .kernel = kernel, .params = p, .decision = work.decision.data(), .trigger = work.trigger.data(),

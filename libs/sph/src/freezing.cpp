@@ -86,11 +86,11 @@ void Simulation<T>::ConvertToIce(const DeviceArray<std::uint32_t>& frozen_list, 
   s.boundary_grid.Query(fx.data(), frozen, support, false, near);
   w.region.resize(s.nb());
   w.region.SetZero();
-  exec::ParallelFor(device_, frozen, kernels::MarkListed{near.offsets.data(), near.indices.data(), w.region.data()});
+  exec::ParallelFor(device_, frozen, kernels::MarkListed{.offsets = near.offsets.data(), .index = near.indices.data(), .flags = w.region.data()});
   const Index dirty = exec::ListFlagged(device_, w.region, s.nb(), s.slot, w.region_list);
   exec::ParallelFor(device_, dirty,
-                    boundary::kernels::BoundaryVolume<T>{s.boundary_grid.view(), CubicSpline<T>(support / 2), s.boundary.volume.data(),
-                                                         w.region_list.data()});
+                    boundary::kernels::BoundaryVolume<T>{.grid = s.boundary_grid.view(), .kernel = CubicSpline<T>(support / 2),
+                                                         .volumes = s.boundary.volume.data(), .list = w.region_list.data()});
   FinishBoundaryVolumes();
 }
 

@@ -26,18 +26,18 @@ void Simulation<T>::NeighborSearch() {
 
   const CubicSpline<T> kernel(T(scene_.fluid.smoothing_length()));
   Neighborhoods<T>& p = s.pairs;
-  s.fluid_grid.QueryGrid(s.fluid_grid, support, true, p.ff);
-  p.ff_w.resize(p.ff.pairs());
-  p.ff_grad.resize(p.ff.pairs());
-  exec::ParallelFor(device_, n,
-                    kernels::PairValues<T>{.xi = s.fluid.x.data(), .xj = s.fluid.x.data(), .offsets = p.ff.offsets.data(),
-                                           .index = p.ff.indices.data(), .kernel = kernel, .w = p.ff_w.data(), .grad = p.ff_grad.data()});
-  s.boundary_grid.QueryGrid(s.fluid_grid, support, false, p.fb);
-  p.fb_w.resize(p.fb.pairs());
-  p.fb_grad.resize(p.fb.pairs());
-  exec::ParallelFor(device_, n,
-                    kernels::PairValues<T>{.xi = s.fluid.x.data(), .xj = s.boundary.x.data(), .offsets = p.fb.offsets.data(),
-                                           .index = p.fb.indices.data(), .kernel = kernel, .w = p.fb_w.data(), .grad = p.fb_grad.data()});
+  // w and ∇W of every pair, from the water (ff) and from the boundary (fb).
+  auto pair_values = [&](const neighbors::UniformGrid<T>& grid, bool same, const Vec3<T>* xj, neighbors::NeighborList& list,
+                         DeviceArray<T>& w, DeviceArray<Vec3<T>>& grad) {
+    grid.QueryGrid(s.fluid_grid, support, same, list);
+    w.resize(list.pairs());
+    grad.resize(list.pairs());
+    exec::ParallelFor(device_, n,
+                      kernels::PairValues<T>{.xi = s.fluid.x.data(), .xj = xj, .offsets = list.offsets.data(), .index = list.indices.data(),
+                                             .kernel = kernel, .w = w.data(), .grad = grad.data()});
+  };
+  pair_values(s.fluid_grid, true, s.fluid.x.data(), p.ff, p.ff_w, p.ff_grad);
+  pair_values(s.boundary_grid, false, s.boundary.x.data(), p.fb, p.fb_w, p.fb_grad);
 }
 
 template <class T>
@@ -52,7 +52,7 @@ double Simulation<T>::ComputeDensity() {
                                         .w0 = kernel.W0(), .rest_density = T(scene_.fluid.rest_density), .density = s.fluid.density.data(),
                                         .density_error = s.step.density_error.data()});
   s.step.scratch.resize(n);
-  exec::ParallelFor(device_, n, kernels::Compression<T>{s.step.density_error.data(), s.step.scratch.data()});
+  exec::ParallelFor(device_, n, kernels::Compression<T>{.density_error = s.step.density_error.data(), .compression = s.step.scratch.data()});
   return exec::Sum(device_, s.step.scratch.data(), n) / double(n) / scene_.fluid.rest_density;
 }
 
@@ -65,22 +65,28 @@ void Simulation<T>::NonPressureAccelerations(double dt) {
   const T h = T(scene_.fluid.smoothing_length());
   st.accel.resize(n);
   const Vec3<T> gravity = modules_.Enabled("gravity") ? ToT<T>(scene_.solver.gravity) : Vec3<T>{};
-  exec::ParallelFor(device_, n, kernels::InitAcceleration<T>{gravity, st.accel.data()});
+  exec::ParallelFor(device_, n, kernels::InitAcceleration<T>{.gravity = gravity, .accel = st.accel.data()});
   if (modules_.Enabled("viscosity")) {
     const io::ViscositySettings& vs = scene_.viscosity;
-    exec::ParallelFor(device_, n, kernels::ViscosityAcceleration<T>{s.FF(), s.fluid.x.data(), s.fluid.v.data(), s.fluid.density.data(), mass, T(vs.mu),
-                                                                     T(vs.beta0 * vs.beta1), h, T(vs.epsilon), vs.limiter, st.accel.data()});
+    exec::ParallelFor(device_, n, kernels::ViscosityAcceleration<T>{.ff = s.FF(), .x = s.fluid.x.data(), .v = s.fluid.v.data(),
+                                                                    .density = s.fluid.density.data(), .mass = mass, .mu = T(vs.mu),
+                                                                    .beta0_beta1 = T(vs.beta0 * vs.beta1), .h = h, .epsilon = T(vs.epsilon),
+                                                                    .limiter = vs.limiter, .accel = st.accel.data()});
     modules_.CountLaunch("viscosity");
   }
   if (s.normals) {
     const io::SurfaceTensionSettings& tension = scene_.surface_tension;
     const T support = T(2) * h;
     s.normals->normal.resize(n);
-    exec::ParallelFor(device_, n, kernels::AkinciNormal<T>{s.FF(), s.fluid.density.data(), mass, support, s.normals->normal.data()});
+    exec::ParallelFor(device_, n, kernels::AkinciNormal<T>{.ff = s.FF(), .density = s.fluid.density.data(), .mass = mass, .support = support,
+                                                           .normal = s.normals->normal.data()});
     exec::ParallelFor(device_, n,
-                      kernels::AkinciSurfaceTensionAcceleration<T>{s.FF(), s.FB(), s.fluid.x.data(), s.boundary.x.data(), s.fluid.density.data(),
-                                                                   s.normals->normal.data(), s.boundary.psi.data(), mass, T(tension.gamma),
-                                                                   T(tension.beta), T(scene_.fluid.rest_density), support, st.accel.data()});
+                      kernels::AkinciSurfaceTensionAcceleration<T>{.ff = s.FF(), .fb = s.FB(), .x = s.fluid.x.data(),
+                                                                   .boundary_x = s.boundary.x.data(), .density = s.fluid.density.data(),
+                                                                   .normal = s.normals->normal.data(), .boundary_psi = s.boundary.psi.data(),
+                                                                   .mass = mass, .gamma = T(tension.gamma), .beta = T(tension.beta),
+                                                                   .rest_density = T(scene_.fluid.rest_density), .support = support,
+                                                                   .accel = st.accel.data()});
     modules_.CountLaunch("surface_tension");
   } else if (s.color_field) {
     const CubicSpline<T> kernel(h);
@@ -88,27 +94,35 @@ void Simulation<T>::NonPressureAccelerations(double dt) {
     c.color.resize(n);
     c.energy.resize(n);
     exec::ParallelFor(device_, n,
-                      kernels::SurfaceColor<T>{s.FF(), s.FB(), s.fluid.density.data(), s.boundary.volume.data(), mass, kernel.W0(), c.color.data()});
-    exec::ParallelFor(device_, n, kernels::SurfaceEnergy<T>{s.FF(), s.fluid.density.data(), c.color.data(), mass, c.energy.data()});
+                      kernels::SurfaceColor<T>{.ff = s.FF(), .fb = s.FB(), .density = s.fluid.density.data(),
+                                               .boundary_volume = s.boundary.volume.data(), .mass = mass, .w0 = kernel.W0(),
+                                               .color = c.color.data()});
+    exec::ParallelFor(device_, n, kernels::SurfaceEnergy<T>{.ff = s.FF(), .density = s.fluid.density.data(), .color = c.color.data(), .mass = mass,
+                                                            .energy = c.energy.data()});
     exec::ParallelFor(device_, n,
-                      kernels::SurfaceTensionAcceleration<T>{s.FF(), s.FB(), s.fluid.density.data(), c.energy.data(), s.boundary.volume.data(), mass,
-                                                             T(scene_.surface_tension.kappa), T(scene_.surface_tension.kappa_boundary),
-                                                             st.accel.data()});
+                      kernels::SurfaceTensionAcceleration<T>{.ff = s.FF(), .fb = s.FB(), .density = s.fluid.density.data(),
+                                                             .energy = c.energy.data(), .boundary_volume = s.boundary.volume.data(), .mass = mass,
+                                                             .kappa = T(scene_.surface_tension.kappa),
+                                                             .kappa_boundary = T(scene_.surface_tension.kappa_boundary), .accel = st.accel.data()});
     modules_.CountLaunch("surface_tension");
   }
   if (modules_.Enabled("air_pressure")) {
-    exec::ParallelFor(device_, n, kernels::AirPressureAcceleration<T>{s.FF(), s.FB(), s.fluid.density.data(), s.boundary.volume.data(), mass,
-                                                                       T(scene_.air_pressure.p_atm), st.accel.data()});
+    exec::ParallelFor(device_, n, kernels::AirPressureAcceleration<T>{.ff = s.FF(), .fb = s.FB(), .density = s.fluid.density.data(),
+                                                                      .boundary_volume = s.boundary.volume.data(), .mass = mass,
+                                                                      .p_atm = T(scene_.air_pressure.p_atm), .accel = st.accel.data()});
     modules_.CountLaunch("air_pressure");
   }
   st.v_adv.resize(n);
   const bool wall_viscosity = modules_.Enabled("viscosity");
   const T wall_coefficient = wall_viscosity ? T(scene_.viscosity.wall_beta0 * scene_.viscosity.beta1) : T(0);
   exec::ParallelFor(device_, n,
-                    kernels::AdvectVelocity<T>{s.fluid.v.data(), st.accel.data(), T(dt), s.FB(), s.fluid.x.data(), s.boundary.x.data(),
-                                               s.boundary.v.data(), s.boundary.psi.data(), s.fluid.density.data(), wall_coefficient, h,
-                                               T(scene_.viscosity.epsilon), T(scene_.fluid.rest_density), scene_.viscosity.limiter,
-                                               CubicSpline<T>(h), s.FF(), s.fluid.pressure.data(), mass, st.v_adv.data()});
+                    kernels::AdvectVelocity<T>{.v = s.fluid.v.data(), .accel = st.accel.data(), .dt = T(dt), .fb = s.FB(), .x = s.fluid.x.data(),
+                                               .boundary_x = s.boundary.x.data(), .boundary_v = s.boundary.v.data(),
+                                               .boundary_psi = s.boundary.psi.data(), .density = s.fluid.density.data(),
+                                               .wall_coefficient = wall_coefficient, .h = h, .epsilon = T(scene_.viscosity.epsilon),
+                                               .rest_density = T(scene_.fluid.rest_density), .limiter = scene_.viscosity.limiter,
+                                               .kernel = CubicSpline<T>(h), .ff = s.FF(), .pressure_previous = s.fluid.pressure.data(),
+                                               .mass = mass, .v_adv = st.v_adv.data()});
 }
 
 template <class T>
@@ -125,9 +139,12 @@ StepStats Simulation<T>::SolvePressure(double dt, double omega) {
   st.s.resize(n);
   const T chi = solver.aii_boundary == "splishsplash" ? T(1) : T(0);
   exec::ParallelFor(device_, n,
-                    kernels::PredictAdvection<T>{s.FF(), s.FB(), st.v_adv.data(), s.boundary.v.data(), s.boundary.psi.data(), s.fluid.density.data(),
-                                                 st.density_error.data(), s.fluid.pressure.data(), mass, T(dt), chi, T(solver.warm_start),
-                                                 st.d_ii.data(), st.advected_error.data(), st.a_ii.data(), st.pressure.data()});
+                    kernels::PredictAdvection<T>{.ff = s.FF(), .fb = s.FB(), .v_adv = st.v_adv.data(), .boundary_v = s.boundary.v.data(),
+                                                 .boundary_psi = s.boundary.psi.data(), .density = s.fluid.density.data(),
+                                                 .density_error = st.density_error.data(), .pressure_previous = s.fluid.pressure.data(),
+                                                 .mass = mass, .dt = T(dt), .chi = chi, .warm_start = T(solver.warm_start), .d_ii = st.d_ii.data(),
+                                                 .advected_error = st.advected_error.data(), .a_ii = st.a_ii.data(),
+                                                 .pressure = st.pressure.data()});
   // ε_a = 1e-6 Δt²/h² (spec §6): below it a particle is (nearly) isolated and gets p = 0.
   const T min_aii = T(1e-6 * dt * dt / (double(h) * double(h)));
   StepStats stats;
@@ -135,11 +152,14 @@ StepStats Simulation<T>::SolvePressure(double dt, double omega) {
   double previous_error = INFINITY;
   int growth_streak = 0;
   for (int l = 0; l < solver.max_iterations; ++l) {
-    exec::ParallelFor(device_, n, kernels::DisplacementSum<T>{s.FF(), st.pressure.data(), s.fluid.density.data(), mass, T(dt), st.s.data()});
+    exec::ParallelFor(device_, n, kernels::DisplacementSum<T>{.ff = s.FF(), .pressure = st.pressure.data(), .density = s.fluid.density.data(),
+                                                              .mass = mass, .dt = T(dt), .s = st.s.data()});
     exec::ParallelFor(device_, n,
-                      kernels::PressureUpdate<T>{s.FF(), s.FB(), st.s.data(), st.d_ii.data(), st.a_ii.data(), st.pressure.data(),
-                                                 s.fluid.density.data(), st.advected_error.data(), s.boundary.psi.data(), mass, T(dt), T(omega),
-                                                 min_aii, st.pressure_next.data(), st.compression.data()});
+                      kernels::PressureUpdate<T>{.ff = s.FF(), .fb = s.FB(), .s = st.s.data(), .d_ii = st.d_ii.data(), .a_ii = st.a_ii.data(),
+                                                 .pressure = st.pressure.data(), .density = s.fluid.density.data(),
+                                                 .advected_error = st.advected_error.data(), .boundary_psi = s.boundary.psi.data(), .mass = mass,
+                                                 .dt = T(dt), .omega = T(omega), .min_aii = min_aii, .pressure_next = st.pressure_next.data(),
+                                                 .compression = st.compression.data()});
     st.pressure.swap(st.pressure_next);
     const double error = exec::Sum(device_, st.compression.data(), n) / double(n) / rho0;
     stats.pressure_iterations = l + 1;
@@ -167,9 +187,10 @@ template <class T>
 void Simulation<T>::Integrate(double dt) {
   State& s = *state_;
   exec::ParallelFor(device_, s.n(),
-                    kernels::IntegratePressure<T>{s.FF(), s.FB(), s.step.pressure.data(), s.fluid.density.data(), s.boundary.psi.data(),
-                                                  s.step.v_adv.data(), T(scene_.fluid.particle_mass()), T(dt), s.fluid.v.data(), s.fluid.x.data(),
-                                                  s.fluid.pressure.data()});
+                    kernels::IntegratePressure<T>{.ff = s.FF(), .fb = s.FB(), .pressure = s.step.pressure.data(), .density = s.fluid.density.data(),
+                                                  .boundary_psi = s.boundary.psi.data(), .v_adv = s.step.v_adv.data(),
+                                                  .mass = T(scene_.fluid.particle_mass()), .dt = T(dt), .v = s.fluid.v.data(),
+                                                  .x = s.fluid.x.data(), .pressure_previous = s.fluid.pressure.data()});
 }
 
 #define RIME_SPH_IISPH_MEMBERS(T)                                  \

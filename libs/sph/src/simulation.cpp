@@ -149,8 +149,10 @@ template <class T>
 void Simulation<T>::FinishBoundaryVolumes() {
   State& s = *state_;
   const double dp = scene_.fluid.spacing;
-  if (s.ice_count > 0) exec::ParallelFor(device_, s.nb(), kernels::CapIceVolume<T>{.phase = s.boundary.phase.data(), .cap = T(dp * dp * dp), .volume = s.boundary.volume.data()});
-  exec::ParallelFor(device_, s.nb(), kernels::Scale<T>{.in = s.boundary.volume.data(), .factor = T(scene_.fluid.rest_density), .out = s.boundary.psi.data()});
+  if (s.ice_count > 0) exec::ParallelFor(device_, s.nb(), kernels::CapIceVolume<T>{.phase = s.boundary.phase.data(), .cap = T(dp * dp * dp),
+                                                                                   .volume = s.boundary.volume.data()});
+  exec::ParallelFor(device_, s.nb(), kernels::Scale<T>{.in = s.boundary.volume.data(), .factor = T(scene_.fluid.rest_density),
+                                                       .out = s.boundary.psi.data()});
 }
 
 template <class T>
@@ -160,7 +162,8 @@ void Simulation<T>::UpdateBoundaryMotion(double t) {
   std::vector<RigidMotion<T>> motions;
   for (const ObjectMotion& m : s.object_motions) motions.push_back(m.At<T>(t));
   s.motions.assign(motions);
-  exec::ParallelFor(device_, s.nb(), kernels::MoveBoundary<T>{.local = s.boundary.local.data(), .object = s.boundary.object.data(), .motions = s.motions.data(),
+  exec::ParallelFor(device_, s.nb(), kernels::MoveBoundary<T>{.local = s.boundary.local.data(), .object = s.boundary.object.data(),
+                                                              .motions = s.motions.data(),
                                                              .x = s.boundary.x.data(), .v = s.boundary.v.data()});
   s.boundary_grid.Build(s.boundary.x.data(), s.nb(), T(2 * scene_.fluid.smoothing_length()), lattice_origin_);
 }
@@ -228,7 +231,7 @@ double Simulation<T>::NextTimeStep(double next_stop) const {
     double max_speed = 0;
     if (s.n() > 0) {
       DeviceArray<T> speed2(device_, s.n());
-      exec::ParallelFor(device_, s.n(), kernels::SquaredSpeed<T>{s.fluid.v.data(), speed2.data()});
+      exec::ParallelFor(device_, s.n(), kernels::SquaredSpeed<T>{.v = s.fluid.v.data(), .out = speed2.data()});
       max_speed = std::sqrt(double(exec::Max(device_, speed2.data(), s.n())));
     }
     // Head speed √(2 g H), H = the fluid's extent along gravity: the speed its own weight can give
@@ -237,7 +240,8 @@ double Simulation<T>::NextTimeStep(double next_stop) const {
     const double g = Norm(scene_.solver.gravity);
     if (s.n() > 0 && g > 0 && modules_.Enabled("gravity")) {
       DeviceArray<T> heights(device_, 2 * s.n());
-      exec::ParallelFor(device_, s.n(), kernels::Heights<T>{s.fluid.x.data(), ToT<T>(scene_.solver.gravity / -g), s.n(), heights.data()});
+      exec::ParallelFor(device_, s.n(), kernels::Heights<T>{.x = s.fluid.x.data(), .up = ToT<T>(scene_.solver.gravity / -g), .n = s.n(),
+                                                            .out = heights.data()});
       const double top = double(exec::Max(device_, heights.data(), s.n()));
       const double bottom = -double(exec::Max(device_, heights.data() + s.n(), s.n()));
       max_speed = std::max(max_speed, std::sqrt(2 * g * (top - bottom)));
@@ -336,7 +340,7 @@ StepStats Simulation<T>::Step(double dt) {
     Integrate(dt);
     stats.max_density_error = s.n() ? exec::Max(device_, s.step.compression.data(), s.n()) / scene_.fluid.rest_density : 0;
     s.step.scratch.resize(s.n());
-    exec::ParallelFor(device_, s.n(), kernels::SquaredSpeed<T>{s.fluid.v.data(), s.step.scratch.data()});
+    exec::ParallelFor(device_, s.n(), kernels::SquaredSpeed<T>{.v = s.fluid.v.data(), .out = s.step.scratch.data()});
     stats.max_speed = std::sqrt(double(exec::Max(device_, s.step.scratch.data(), s.n())));
   }
   CheckDivergence(stats);

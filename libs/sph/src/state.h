@@ -25,6 +25,11 @@ using freeze::FreezingBoundary;
 using freeze::FreezingFluid;
 using freeze::FreezingWork;
 
+// Water and boundary rows of a frame share these datasets (x y z, vx vy vz, id).
+inline constexpr AttributeInfo kPositions{.name = "", .checkpointed = true, .names = Names::kXyz};
+inline constexpr AttributeInfo kVelocities{.name = "v", .checkpointed = true, .names = Names::kXyz};
+inline constexpr AttributeInfo kIds{.name = "id", .checkpointed = true};
+
 /// Water state carried from step to step and in frames; reordered with the particles.
 template <class T>
 struct FluidState {
@@ -39,9 +44,9 @@ struct FluidState {
   template <class F> void ForEach(F&& f) const { Visit(*this, f); }
   template <class Self, class F>
   static void Visit(Self& s, F& f) {
-    f(AttributeInfo{.name = "", .checkpointed = true, .names = Names::kXyz}, s.x);
-    f(AttributeInfo{.name = "v", .checkpointed = true, .names = Names::kXyz}, s.v);
-    f(AttributeInfo{.name = "id", .checkpointed = true}, s.id);
+    f(kPositions, s.x);
+    f(kVelocities, s.v);
+    f(kIds, s.id);
     f(AttributeInfo{.name = "pressure", .checkpointed = true}, s.pressure);
     f(AttributeInfo{.name = "density", .checkpointed = true, .fill = Fill::kRestDensity}, s.density);
   }
@@ -124,12 +129,12 @@ struct BoundaryState {
   template <class F> void ForEach(F&& f) const { Visit(*this, f); }
   template <class Self, class F>
   static void Visit(Self& s, F& f) {
-    f(AttributeInfo{.name = "", .checkpointed = true, .names = Names::kXyz}, s.x);
-    f(AttributeInfo{.name = "v", .checkpointed = true, .names = Names::kXyz}, s.v);
+    f(kPositions, s.x);
+    f(kVelocities, s.v);
     f(AttributeInfo{.name = "local", .checkpointed = true}, s.local);
     f(AttributeInfo{.name = "object_id", .checkpointed = true}, s.object);
     f(AttributeInfo{.name = "phase", .checkpointed = true}, s.phase);
-    f(AttributeInfo{.name = "id", .checkpointed = true}, s.id);
+    f(kIds, s.id);
     f(AttributeInfo{.name = "volume", .checkpointed = true}, s.volume);
     f(AttributeInfo{.name = "psi"}, s.psi);
   }
@@ -200,25 +205,20 @@ struct Simulation<T>::State {
   std::int64_t ice_count = 0;
 
   /// Calls f(group) for every water group that exists (they share the particle order).
-  template <class F>
-  void ForEachFluidGroup(F&& f) {
-    f(fluid);
-    if (freezing_fluid) f(*freezing_fluid);
+  template <class F> void ForEachFluidGroup(F&& f) { FluidGroups(*this, f); }
+  template <class F> void ForEachFluidGroup(F&& f) const { FluidGroups(*this, f); }
+  /// Calls f(group) for every boundary group that exists.
+  template <class F> void ForEachBoundaryGroup(F&& f) { BoundaryGroups(*this, f); }
+  template <class F> void ForEachBoundaryGroup(F&& f) const { BoundaryGroups(*this, f); }
+  template <class Self, class F>
+  static void FluidGroups(Self& s, F& f) {
+    f(s.fluid);
+    if (s.freezing_fluid) f(*s.freezing_fluid);
   }
-  template <class F>
-  void ForEachFluidGroup(F&& f) const {
-    f(fluid);
-    if (freezing_fluid) f(*freezing_fluid);
-  }
-  template <class F>
-  void ForEachBoundaryGroup(F&& f) {
-    f(boundary);
-    if (freezing) f(*freezing);
-  }
-  template <class F>
-  void ForEachBoundaryGroup(F&& f) const {
-    f(boundary);
-    if (freezing) f(*freezing);
+  template <class Self, class F>
+  static void BoundaryGroups(Self& s, F& f) {
+    f(s.boundary);
+    if (s.freezing) f(*s.freezing);
   }
 
   /// Calls f(module, group) for every group that exists.

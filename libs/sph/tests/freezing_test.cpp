@@ -14,25 +14,9 @@
 namespace rime::sph {
 namespace {
 
-constexpr double kDp = 0.02;
+constexpr double kDp = test::kDropSpacing;
 
-// A block of water thrown onto the floor of a shallow box.
-io::Scene DropScene(double glaze, double icicle, Vec3d velocity = {0, 0, -1}) {
-  io::Scene scene;
-  scene.fluid.spacing = kDp;
-  scene.modules = {"gravity", "viscosity", "freezing"};
-  io::FluidBlock b;
-  b.min = {0.3, 0.3, 0.1};
-  b.max = {0.42, 0.42, 0.2};
-  b.velocity = velocity;
-  scene.fluid_blocks.push_back(b);
-  io::SolidObject box;
-  box.name = "box";
-  scene.solids.push_back(box);
-  scene.freezing.glaze_threshold = glaze;
-  scene.freezing.icicle_threshold = icicle;
-  return scene;
-}
+using test::DropScene;
 
 struct Observed {
   std::map<std::int64_t, Vec3f> ice;  // id -> position
@@ -55,12 +39,7 @@ Observed Observe(const Simulation<float>& sim) {
   return o;
 }
 
-std::unique_ptr<Simulation<float>> Make(const io::Scene& scene) {
-  auto sim = std::make_unique<Simulation<float>>(scene, exec::Device::Cpu());
-  sim->AddBoundaryObject(test::BoxBoundary(kDp, 0.72, 0.72, 0.2), "box");
-  sim->Initialize();
-  return sim;
-}
+std::unique_ptr<Simulation<float>> Make(const io::Scene& scene) { return test::MakeDrop(scene); }
 
 TEST(Freezing, InvariantsAlongARun) {
   auto sim = Make(DropScene(0.05, 0.01));

@@ -17,37 +17,18 @@
 namespace rime::sph {
 namespace {
 
-constexpr double kDp = 0.02;
-
-// A block of water thrown onto the floor of a shallow box; freezing optional.
+// The drop scene of the freezing tests, with freezing on or off.
 io::Scene DropScene(bool freezing) {
-  io::Scene scene;
-  scene.fluid.spacing = kDp;
-  scene.modules = {"gravity", "viscosity"};
-  if (freezing) scene.modules.insert("freezing");
-  io::FluidBlock b;
-  b.min = {0.3, 0.3, 0.1};
-  b.max = {0.42, 0.42, 0.2};
-  b.velocity = {0, 0, -1};
-  scene.fluid_blocks.push_back(b);
-  io::SolidObject box;
-  box.name = "box";
-  scene.solids.push_back(box);
-  scene.freezing.glaze_threshold = 0.05;
-  scene.freezing.icicle_threshold = 0.01;
+  io::Scene scene = test::DropScene(0.05, 0.01);
+  if (!freezing) scene.modules.erase("freezing");
   return scene;
 }
 
-std::unique_ptr<Simulation<float>> Make(const io::Scene& scene) {
-  auto sim = std::make_unique<Simulation<float>>(scene, exec::Device::Cpu());
-  sim->AddBoundaryObject(test::BoxBoundary(kDp, 0.72, 0.72, 0.2), "box");
-  sim->Initialize();
-  return sim;
-}
+using test::MakeDrop;
 
 TEST(ParticleGroups, FreezingOffAllocatesNothing) {
-  auto without = Make(DropScene(false));
-  auto with = Make(DropScene(true));
+  auto without = MakeDrop(DropScene(false));
+  auto with = MakeDrop(DropScene(true));
   for (int i = 0; i < 5; ++i) {
     without->Step(0.002);
     with->Step(0.002);
@@ -114,7 +95,7 @@ void ExpectFrameIsTheState(const Simulation<float>& sim, const std::string& labe
 TEST(ParticleGroups, FrameFieldsAreTheSolversState) {
   io::Scene scene = DropScene(true);
   scene.freezing.freeze_delay = 0.01;  // so that the nucleation clocks are stored too
-  auto sim = Make(scene);
+  auto sim = MakeDrop(scene);
   bool froze = false, calm = false;
   while (sim->time() < 0.5 && !(froze && calm)) {
     const StepStats stats = sim->Step(sim->NextTimeStep(0.5));

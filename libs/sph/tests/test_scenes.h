@@ -3,11 +3,14 @@
 #pragma once
 
 #include <cmath>
+#include <memory>
 #include <string>
 #include <vector>
 
 #include "rime/io/particles.h"
 #include "rime/io/scene.h"
+#include "rime/exec/device.h"
+#include "rime/sph/simulation.h"
 
 namespace rime::sph::test {
 
@@ -82,5 +85,33 @@ inline io::Scene ColumnScene(double dp, int nx, int ny, int nz, double wall_heig
 }
 
 inline double BoxWidth(double dp, int n) { return (n - 1) * dp + 2.2 * dp; }
+
+inline constexpr double kDropSpacing = 0.02;
+
+/// A block of water thrown onto the floor of a shallow box (MakeDrop), freezing on.
+inline io::Scene DropScene(double glaze, double icicle, Vec3d velocity = {0, 0, -1}) {
+  io::Scene scene;
+  scene.fluid.spacing = kDropSpacing;
+  scene.modules = {"gravity", "viscosity", "freezing"};
+  io::FluidBlock b;
+  b.min = {0.3, 0.3, 0.1};
+  b.max = {0.42, 0.42, 0.2};
+  b.velocity = velocity;
+  scene.fluid_blocks.push_back(b);
+  io::SolidObject box;
+  box.name = "box";
+  scene.solids.push_back(box);
+  scene.freezing.glaze_threshold = glaze;
+  scene.freezing.icicle_threshold = icicle;
+  return scene;
+}
+
+/// The solver for a DropScene in its box, initialised.
+inline std::unique_ptr<Simulation<float>> MakeDrop(const io::Scene& scene) {
+  auto sim = std::make_unique<Simulation<float>>(scene, exec::Device::Cpu());
+  sim->AddBoundaryObject(BoxBoundary(kDropSpacing, 0.72, 0.72, 0.2), "box");
+  sim->Initialize();
+  return sim;
+}
 
 }  // namespace rime::sph::test
