@@ -13,8 +13,6 @@
 
 namespace rime::sph {
 
-static_assert(freeze::kIcePhase == std::uint8_t(io::Phase::kIce), "device kernels and files must agree on the ice phase");
-
 template <class T>
 void Simulation<T>::Freeze(double dt) {
   State& s = *state_;

@@ -13,6 +13,7 @@
 
 #include "rime/exec/attributes.h"
 #include "rime/freeze/kernels.h"
+#include "rime/io/particles.h"
 #include "rime/io/scene.h"
 #include "rime/neighbors/grid.h"
 
@@ -32,6 +33,8 @@ namespace rime::freeze {
 
 using exec::AttributeInfo;
 using exec::DeviceArray;
+
+static_assert(kIcePhase == std::uint8_t(io::Phase::kIce), "device kernels and files must agree on the ice phase");
 
 /// Freezing state of boundary particles: the water film on solids and ice, and what ice keeps.
 template <class T>

@@ -16,7 +16,7 @@
 
 namespace rime::freeze {
 
-/// Boundary phase of ice (io::Phase::kIce; io is host-only, checked in simulation.cpp).
+/// Boundary phase of ice (io::Phase::kIce; io is host-only, checked in freezing.h).
 inline constexpr std::uint8_t kIcePhase = 2;
 
 /// A symmetric 3x3 matrix as six components (xx, yy, zz, xy, xz, yz): the stored anisotropy D.

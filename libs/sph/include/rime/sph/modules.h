@@ -16,7 +16,8 @@ class ModuleRegistry {
   bool Enabled(const std::string& module) const { return enabled_.count(module) != 0; }
   const std::set<std::string>& enabled() const { return enabled_; }
 
-  /// Records that `module` owns the per-particle attribute `attribute`.
+  /// Records that `module` owns the per-particle attribute `attribute` (done by each attribute group
+  /// as it is allocated, src/state.h).
   void RecordAttribute(const std::string& module, const std::string& attribute) { attributes_[attribute] = module; }
   bool HasAttribute(const std::string& attribute) const { return attributes_.count(attribute) != 0; }
   const std::map<std::string, std::string>& attributes() const { return attributes_; }
