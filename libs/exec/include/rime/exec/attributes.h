@@ -1,7 +1,7 @@
 /// @file attributes.h
 /// @brief How a group of per-particle arrays declares its attributes once, and the operations
-/// every group gets from that one list: grow, reorder/compact, reset, write to and read from a
-/// frame, and count bytes.
+/// every group gets from that one list: grow, reorder/compact, reset and count bytes (the solver
+/// writes and reads frames from the same list, libs/sph/src/frame_rows.h).
 ///
 /// A group is a struct of DeviceArrays with a member `ForEach(f)` that calls `f(info, array)` for
 /// each array, in the order the struct lists them. Every array of a group holds one value per
@@ -21,6 +21,7 @@
 #include <map>
 #include <memory>
 #include <string>
+#include <type_traits>
 #include <typeindex>
 #include <utility>
 #include <vector>
