@@ -32,7 +32,7 @@ inline constexpr AttributeInfo kIds{.name = "id", .checkpointed = true};
 
 /// Water state carried from step to step and in frames; reordered with the particles.
 template <class T>
-struct FluidState {
+struct FluidState : exec::AttributeGroup<FluidState<T>> {
   static constexpr const char* kModule = "core";
   explicit FluidState(const exec::Device& d) : x(d), v(d), id(d), pressure(d), density(d) {}
   DeviceArray<Vec3<T>> x, v;
@@ -40,8 +40,6 @@ struct FluidState {
   DeviceArray<T> pressure;  // of the last step: the next solve's warm start
   DeviceArray<T> density;   // of the last step; the rest density until the first step
 
-  template <class F> void ForEach(F&& f) { Visit(*this, f); }
-  template <class F> void ForEach(F&& f) const { Visit(*this, f); }
   template <class Self, class F>
   static void Visit(Self& s, F& f) {
     f(kPositions, s.x);
@@ -54,7 +52,7 @@ struct FluidState {
 
 /// Water quantities computed within one step (sized, not reordered, by the step).
 template <class T>
-struct FluidStep {
+struct FluidStep : exec::AttributeGroup<FluidStep<T>> {
   static constexpr const char* kModule = "core";
   explicit FluidStep(const exec::Device& d)
       : v_adv(d), accel(d), d_ii(d), s(d), density_error(d), pressure(d), pressure_next(d), advected_error(d), a_ii(d),
@@ -62,8 +60,6 @@ struct FluidStep {
   DeviceArray<Vec3<T>> v_adv, accel, d_ii, s;
   DeviceArray<T> density_error, pressure, pressure_next, advected_error, a_ii, compression, scratch;
 
-  template <class F> void ForEach(F&& f) { Visit(*this, f); }
-  template <class F> void ForEach(F&& f) const { Visit(*this, f); }
   template <class Self, class F>
   static void Visit(Self& s, F& f) {
     f(AttributeInfo{.name = "advected_velocity"}, s.v_adv);
@@ -82,13 +78,11 @@ struct FluidStep {
 
 /// He 2014 surface tension: colour field and its energy, per step.
 template <class T>
-struct SurfaceColorField {
+struct SurfaceColorField : exec::AttributeGroup<SurfaceColorField<T>> {
   static constexpr const char* kModule = "surface_tension";
   explicit SurfaceColorField(const exec::Device& d) : color(d), energy(d) {}
   DeviceArray<T> color, energy;
 
-  template <class F> void ForEach(F&& f) { Visit(*this, f); }
-  template <class F> void ForEach(F&& f) const { Visit(*this, f); }
   template <class Self, class F>
   static void Visit(Self& s, F& f) {
     f(AttributeInfo{.name = "color"}, s.color);
@@ -98,13 +92,11 @@ struct SurfaceColorField {
 
 /// Akinci 2013 surface tension: surface normals, per step.
 template <class T>
-struct SurfaceNormals {
+struct SurfaceNormals : exec::AttributeGroup<SurfaceNormals<T>> {
   static constexpr const char* kModule = "surface_tension";
   explicit SurfaceNormals(const exec::Device& d) : normal(d) {}
   DeviceArray<Vec3<T>> normal;
 
-  template <class F> void ForEach(F&& f) { Visit(*this, f); }
-  template <class F> void ForEach(F&& f) const { Visit(*this, f); }
   template <class Self, class F>
   static void Visit(Self& s, F& f) {
     f(AttributeInfo{.name = "surface_normal"}, s.normal);
@@ -114,7 +106,7 @@ struct SurfaceNormals {
 /// Boundary particles: the solids of the boundary files, then ice in the order it froze. Written
 /// to frames (and read back) only with freezing on: otherwise the boundary files are the state.
 template <class T>
-struct BoundaryState {
+struct BoundaryState : exec::AttributeGroup<BoundaryState<T>> {
   static constexpr const char* kModule = "core";
   explicit BoundaryState(const exec::Device& d) : x(d), v(d), local(d), object(d), phase(d), id(d), volume(d), psi(d) {}
   DeviceArray<Vec3<T>> x, v;
@@ -125,8 +117,6 @@ struct BoundaryState {
   DeviceArray<T> volume;  // Akinci V_b, as the run has it (updated near new ice only)
   DeviceArray<T> psi;     // Ψ_b = ρ0 V_b
 
-  template <class F> void ForEach(F&& f) { Visit(*this, f); }
-  template <class F> void ForEach(F&& f) const { Visit(*this, f); }
   template <class Self, class F>
   static void Visit(Self& s, F& f) {
     f(kPositions, s.x);
@@ -142,15 +132,13 @@ struct BoundaryState {
 
 /// Pairs of the water's neighborhoods and their kernel values, rebuilt every step.
 template <class T>
-struct Neighborhoods {
+struct Neighborhoods : exec::AttributeGroup<Neighborhoods<T>> {
   static constexpr const char* kModule = "core";
   explicit Neighborhoods(const exec::Device& d) : ff(d), fb(d), ff_w(d), fb_w(d), ff_grad(d), fb_grad(d) {}
   neighbors::NeighborList ff, fb;
   DeviceArray<T> ff_w, fb_w;
   DeviceArray<Vec3<T>> ff_grad, fb_grad;
 
-  template <class F> void ForEach(F&& f) { Visit(*this, f); }
-  template <class F> void ForEach(F&& f) const { Visit(*this, f); }
   template <class Self, class F>
   static void Visit(Self& s, F& f) {
     f(AttributeInfo{.name = "ff_offsets"}, s.ff.offsets);

@@ -3,14 +3,15 @@
 /// every group gets from that one list: grow, reorder/compact, reset and count bytes (the solver
 /// writes and reads frames from the same list, libs/sph/src/frame_rows.h).
 ///
-/// A group is a struct of DeviceArrays with a member `ForEach(f)` that calls `f(info, array)` for
-/// each array, in the order the struct lists them. Every array of a group holds one value per
+/// A group is a struct of DeviceArrays deriving from AttributeGroup, whose static `Visit(group, f)`
+/// calls `f(info, array)` for each array, in the order the struct lists them. Every array of a group holds one value per
 /// particle of the group, so the operations below never name an attribute.
 ///
 /// @code
-/// struct Example {
-///   DeviceArray<Vec3<T>> x;
-///   template <class F> void ForEach(F&& f) { f(AttributeInfo{.name = "", .names = Names::kXyz}, x); }
+/// struct Example : AttributeGroup<Example> {
+///   DeviceArray<Vec3<float>> x;
+///   template <class Self, class F>
+///   static void Visit(Self& s, F& f) { f(AttributeInfo{.name = "", .names = Names::kXyz}, s.x); }
 /// };
 /// GrowGroup(device, group, 10, rho0); GatherGroup(device, group, order, count, pool); GroupBytes(group);
 /// @endcode
@@ -48,6 +49,20 @@ struct AttributeInfo {
   bool checkpointed = false;  // written to frames and read back on resume
   Names names = Names::kIndexed;
   Fill fill = Fill::kZero;
+};
+
+/// Gives a group its ForEach, for mutable and const groups alike, from the group's one list: its
+/// static Visit(group, f).
+template <class Group>
+struct AttributeGroup {
+  template <class F>
+  void ForEach(F&& f) {
+    Group::Visit(static_cast<Group&>(*this), f);
+  }
+  template <class F>
+  void ForEach(F&& f) const {
+    Group::Visit(static_cast<const Group&>(*this), f);
+  }
 };
 
 /// Component access for the element types of attributes: scalars and Vec3 here; a library with its

@@ -38,7 +38,7 @@ static_assert(kIcePhase == std::uint8_t(io::Phase::kIce), "device kernels and fi
 
 /// Freezing state of boundary particles: the water film on solids and ice, and what ice keeps.
 template <class T>
-struct FreezingBoundary {
+struct FreezingBoundary : exec::AttributeGroup<FreezingBoundary<T>> {
   static constexpr const char* kModule = "freezing";
   explicit FreezingBoundary(const exec::Device& d) : film(d), growth(d), growth_valid(d), ice_kind(d), ice_time(d), ice_d(d) {}
   DeviceArray<T> film;  // Γ/Γ_max
@@ -48,8 +48,6 @@ struct FreezingBoundary {
   DeviceArray<double> ice_time;        // creation time, s
   DeviceArray<Sym6<T>> ice_d;  // anisotropy D frozen with the particle
 
-  template <class F> void ForEach(F&& f) { Visit(*this, f); }
-  template <class F> void ForEach(F&& f) const { Visit(*this, f); }
   template <class Self, class F>
   static void Visit(Self& s, F& f) {
     f(AttributeInfo{.name = "water_film", .checkpointed = true}, s.film);
@@ -64,13 +62,11 @@ struct FreezingBoundary {
 /// Nucleation delay (freezing.freeze_delay > 0): seconds each water particle spent above a
 /// freezing threshold; persistent, so it moves with the water.
 template <class T>
-struct FreezingFluid {
+struct FreezingFluid : exec::AttributeGroup<FreezingFluid<T>> {
   static constexpr const char* kModule = "freezing";
   explicit FreezingFluid(const exec::Device& d) : contact_time(d) {}
   DeviceArray<T> contact_time;
 
-  template <class F> void ForEach(F&& f) { Visit(*this, f); }
-  template <class F> void ForEach(F&& f) const { Visit(*this, f); }
   template <class Self, class F>
   static void Visit(Self& s, F& f) {
     f(AttributeInfo{.name = "contact_time", .checkpointed = true}, s.contact_time);
@@ -79,7 +75,7 @@ struct FreezingFluid {
 
 /// Per-step work arrays of the freezing step (sized by it: water, boundary or list lengths).
 template <class T>
-struct FreezingWork {
+struct FreezingWork : exec::AttributeGroup<FreezingWork<T>> {
   static constexpr const char* kModule = "freezing";
   explicit FreezingWork(const exec::Device& d)
       : fluid_d(d), fluid_flag(d), boundary_active(d), active_list(d), decision(d), trigger(d), frozen(d), wet(d), region(d),
@@ -90,8 +86,6 @@ struct FreezingWork {
   DeviceArray<Vec3<T>> active_x;
   neighbors::NeighborList bf;  // boundary–fluid pairs of the boundary particles touching water
 
-  template <class F> void ForEach(F&& f) { Visit(*this, f); }
-  template <class F> void ForEach(F&& f) const { Visit(*this, f); }
   template <class Self, class F>
   static void Visit(Self& s, F& f) {
     f(AttributeInfo{.name = "fluid_anisotropy"}, s.fluid_d);
