@@ -18,13 +18,49 @@ namespace fs = std::filesystem;
 using namespace rime;
 using namespace rime::bake;
 
+namespace {
+
+// The output folder and every folder the bake writes under it (one could be a symlink leading
+// out), and each mesh the scene names, resolved the way rime-boundary resolves it.
+void RequireInSandbox(const Sandbox& sandbox, const io::Scene& scene, const BakeLayout& layout) {
+  if (!sandbox.enabled()) return;
+  for (const io::SolidObject& solid : scene.solids)
+    if (solid.shape == "mesh")
+      sandbox.Require(scene.Resolve(solid.mesh), fmt::format("{}: solid '{}' mesh", scene.file.string(), solid.name),
+                      ExitCode::kBadInput);
+  for (const fs::path& folder : {layout.output, layout.cache(), layout.state_folder(), layout.logs(), layout.boundary(),
+                                 layout.sim(), layout.surface(), layout.clean(), layout.preview(), layout.cache() / "preview"})
+    sandbox.Require(folder, "-o", ExitCode::kUsage);
+  for (const char* name : {"state.json", "lock"}) sandbox.Require(layout.state_folder() / name, "-o (bake state)", ExitCode::kUsage);
+}
+
+// Every file a job reads or writes: a file inside the output folder can itself be a symlink.
+// Programs hashed into a key (ffmpeg) are tools, not data, like --tools.
+void RequireInSandbox(const Sandbox& sandbox, const Job& job, const GraphOptions& graph) {
+  if (!sandbox.enabled()) return;
+  const std::string field = fmt::format("-o ({} job)", job.id);
+  for (const auto* paths : {&job.inputs, &job.optional_inputs, &job.outputs})
+    for (const fs::path& p : *paths)
+      if (p != graph.ffmpeg && p != graph.blender) sandbox.Require(p, field, ExitCode::kUsage);
+  sandbox.Require(job.log, field, ExitCode::kUsage);
+}
+
+}  // namespace
+
 int main(int argc, char** argv) {
   CLI::App app{
       "Bakes a scene: boundary -> sim -> surface -> cleanup (-> preview), rerunning only the jobs whose tool, command, scene "
       "sections or input files changed. Outputs go to <output>/surface, <output>/clean and <output>/preview; particles, "
       "logs and the bake state to <output>/cache."};
   tool::CommonOptions common;
-  tool::Setup(app, "rime-bake", common, tool::kDevice | tool::kFrames | tool::kJsonSummary);
+  tool::Setup(app, "rime-bake", common, tool::kDevice | tool::kFrames | tool::kJsonSummary | tool::kMemoryBudget | tool::kSandbox);
+  app.get_option("--memory-budget")
+      ->description("Passed to every stage tool, which refuses to start (exit 10, nothing written) when the peak memory it "
+                    "estimates from its inputs exceeds it; the per-frame stages each get SIZE divided by -j. SIZE: 512M, 4G, "
+                    "1.5GiB or bytes (powers of 1024). Default: each tool takes the memory available when it starts");
+  app.get_option("--sandbox")
+      ->description("Refuse (nothing written) when the scene, a mesh path in the scene, the output folder, the cache or any "
+                    "file a job reads or writes does not resolve inside DIR after following symlinks; passed to every stage tool");
   std::string scene_file, target_name = "all", only_name, output, tools_folder;
   int parallel_frames = 1;
   bool force = false, dry_run = false, explain = false, clean = false;
@@ -80,10 +116,14 @@ int main(int argc, char** argv) {
       if (!only) throw Error(ExitCode::kUsage, fmt::format("unknown stage '{}' for --only (boundary, sim, surface, cleanup, preview)", only_name));
     }
 
+    const Sandbox sandbox = tool::MakeSandbox(common);
+    sandbox.Require(scene_file, "scene", ExitCode::kUsage);
+    const std::uint64_t memory_budget = common.memory_budget.empty() ? 0 : ParseByteSize(common.memory_budget);
     const SceneDocument doc = SceneDocument::Load(scene_file);
     BakeLayout layout;
     layout.scene_file = scene_file;
     layout.output = output.empty() ? fs::path("out") / doc.scene().info.name : fs::path(output);
+    RequireInSandbox(sandbox, doc.scene(), layout);
 
     if (clean) {
       RefuseWhileFarmJobsAlive(layout);
@@ -111,6 +151,9 @@ int main(int argc, char** argv) {
       graph.cpu_threads = allocated ? std::max(1, std::atoi(allocated)) : 0;
     }
     graph.device = common.device;
+    graph.memory_budget = memory_budget;
+    graph.parallel_frames = parallel_frames;
+    if (sandbox.enabled()) graph.sandbox = sandbox.root();
     graph.blender = FindOnPath("blender");
     graph.ffmpeg = FindOnPath("ffmpeg");
     const Stage last_stage = only ? *only : *target;
@@ -160,6 +203,7 @@ int main(int argc, char** argv) {
     if (!dry_run) RefuseWhileFarmJobsAlive(layout);
 
     std::vector<Job> jobs = BuildGraph(doc, layout, graph, last_stage);
+    for (const Job& job : jobs) RequireInSandbox(sandbox, job, graph);
     if (!dry_run && std::any_of(jobs.begin(), jobs.end(), [](const Job& j) { return j.stage == Stage::kPreview; }))
       WritePreviewFiles(doc, layout);
 

@@ -44,7 +44,11 @@ MemoryBudget ResolveMemoryBudget(const std::string& flag_text);
 /// estimates; `largest` receives the index of the largest one (0 when there is none).
 double ConcurrentPeak(const std::vector<double>& estimates, std::size_t at_once, std::size_t* largest = nullptr);
 
-/// Throws rime::Error (kExitOverBudget) when `estimate_bytes` exceeds the budget, as one line:
+/// Resident memory of this process now (/proc/self/statm), bytes; 0 when it cannot be read.
+std::uint64_t ResidentBytes();
+
+/// Throws rime::Error (kExitOverBudget) when this process's resident memory now plus
+/// `estimate_bytes` (what the work will allocate on top of it) exceeds the budget, as one line:
 /// `needs about 14.2 GiB for 310 M voxels (frame f.h5part, voxel 2 mm), budget 8 GiB (--memory-budget)`.
 /// `driver` is what the estimate grows with, `context` the input that drives it.
 void CheckMemoryBudget(const MemoryBudget& budget, double estimate_bytes, std::string_view driver, std::string_view context);
