@@ -132,8 +132,9 @@ double CountTriangles(const fs::path& path) {
 
 // Peak bytes of cleaning a mesh of this many triangles: the input mesh, CGAL's Surface_mesh with
 // its property maps, the AABB tree for the velocity transfer and the decimation and
-// self-intersection scratch. Calibrated against measured peaks in docs/reliability.md.
-double CleanBytes(double triangles) { return triangles * 400; }
+// self-intersection scratch. Measured with the default steps: about 225 B per triangle above the
+// process's base (docs/reliability.md); 300 B leaves room for the repair and remesh paths.
+double CleanBytes(double triangles) { return triangles * 300; }
 
 /// Adds the file to an error raised without one (meshfix does not know file names).
 [[noreturn]] void Rethrow(const Error& e, const fs::path& file) {
