@@ -94,7 +94,8 @@ int main(int argc, char** argv) {
       "Exit codes: 0 ok (everything up to the target is up to date), 1 internal failure, 2 bad command line, 3 bad scene file or "
       "missing stage tool, 5 cannot write the output or cache, a stage tool could not write its output, or another rime-bake is using the "
       "folder (the message names its pid, host and start time), 7 a stage failed (the message names stage, frame and log), "
-      "8 --only refused (inputs missing or stale), 9 --farm: Slurm's commands missing or a submission refused, 130 interrupted (rerun to continue; the simulation resumes).");
+      "8 --only refused (inputs missing or stale), 9 --farm: Slurm's commands missing or a submission refused, 10 a stage tool refused to "
+      "start above its --memory-budget, 130 interrupted (rerun to continue; the simulation resumes).");
 
   return tool::Main(app, argc, argv, common, [&]() -> int {
     // The farm verbs default to the target and frames of the last submission.

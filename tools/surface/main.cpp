@@ -140,7 +140,11 @@ void CheckMemory(const std::vector<FrameFile>& frames, const std::vector<PhaseJo
       std::uint64_t v = 0;
       const double bytes = double(surface::EstimateMemoryBytes(particles, s, &v));
       // Phases of a frame are surfaced one after the other: the larger one sets the peak.
-      if (bytes > estimates[k]) estimates[k] = bytes, voxels[k] = double(v), voxel_sizes[k] = particles.size() ? surface::VoxelSize(particles, s) : 0;
+      if (bytes > estimates[k]) {
+        estimates[k] = bytes;
+        voxels[k] = double(v);
+        voxel_sizes[k] = particles.size() ? surface::VoxelSize(particles, s) : 0;
+      }
     }
   });
   // Frames run side by side, up to one per thread: the largest ones may meet.

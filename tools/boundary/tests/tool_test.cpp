@@ -137,14 +137,15 @@ TEST_F(RimeBoundaryTool, RefusesAboveTheMemoryBudgetWithoutOutput) {
             std::string::npos)
       << mesh.err;
   EXPECT_FALSE(fs::exists(dir_ / "tetra.h5part"));
-  // A scene: the first solid fits, the box does not; no file of either is written.
+  // A scene: the first solid fits, the box (about 550 k particles, 66 MB) does not; no file of
+  // either is written. The budget leaves room for the process itself (about 25 MB).
   Write("scene.toml",
-        "[water]\nspacing = 0.01\n\n"
+        "[water]\nspacing = 0.004\n\n"
         "[[solid]]\nname = \"prop\"\nshape = \"mesh\"\nmesh = \"tetra.obj\"\nscale = 0.05\n\n"
         "[[solid]]\nname = \"tank\"\nshape = \"box\"\ncontainer = true\nsize = [1.0, 0.5, 0.4]\n");
-  const Result scene = Run((dir_ / "scene.toml").string() + " -o " + (dir_ / "boundary").string() + " --memory-budget 1M");
+  const Result scene = Run((dir_ / "scene.toml").string() + " -o " + (dir_ / "boundary").string() + " --memory-budget 48M");
   EXPECT_EQ(scene.code, 10) << scene.err;
-  EXPECT_NE(scene.err.find("particles (solid tank, spacing 10 mm), budget 1 MiB"), std::string::npos) << scene.err;
+  EXPECT_NE(scene.err.find("particles (solid tank, spacing 4 mm), budget 48 MiB"), std::string::npos) << scene.err;
   EXPECT_EQ(std::count(scene.err.begin(), scene.err.end(), '\n'), 1) << scene.err;
   EXPECT_FALSE(fs::exists(dir_ / "boundary"));
   // The same scene under the default budget (the memory available).
