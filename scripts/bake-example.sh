@@ -1,14 +1,14 @@
 #!/usr/bin/env bash
-# The main job (README.md): installs what is missing, builds the release preset and bakes the
+# The main job (README.md): installs what is missing, builds the bake's programs and bakes the
 # built-in example scene end to end into out/default/ (rime-bake reruns only what is stale, so
 # running it again is quick).
 #   scripts/bake-example.sh [SCENE.toml [rime-bake flags...]]
 set -euo pipefail
 cd "$(dirname "$0")/.."
-scripts/setup.sh release
+scripts/setup.sh tools
 SCENE="${1:-examples/default.toml}"
 shift || true
-BIN=build/release/bin
+BIN=build/rime/bin
 if [ ! -x "$BIN/rime-bake" ]; then
   echo "bake-example: $BIN/rime-bake was not built" >&2
   exit 1

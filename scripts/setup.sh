@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # Installs the Debian 12 packages Rime builds against (idempotent: installs only what is missing),
-# then configures and builds the given CMake preset.
-#   scripts/setup.sh [PRESET]      (default preset: release)
+# then configures and builds the given CMake build preset.
+#   scripts/setup.sh [PRESET]      (default: tools)
+# "tools" (the bake's programs) and "test" (everything) share one tree, build/rime, so the two
+# README commands compile each file once between them.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -13,7 +15,9 @@ PACKAGES=(
   slurm-wlm  # the farm test starts a single-node Slurm cluster on localhost (tests/farm)
 )
 
-PRESET="${1:-release}"
+PRESET="${1:-tools}"
+CONFIGURE_PRESET="$PRESET"
+[ "$PRESET" = tools ] && CONFIGURE_PRESET=test
 # The fuzz preset builds with clang and links libFuzzer and the sanitizer runtimes.
 [ "$PRESET" = fuzz ] && PACKAGES+=(clang libclang-rt-14-dev)
 
@@ -29,5 +33,5 @@ if ((${#missing[@]})); then
   DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
 fi
 
-cmake --preset "$PRESET" >/dev/null
+cmake --preset "$CONFIGURE_PRESET" >/dev/null
 cmake --build --preset "$PRESET"

@@ -112,6 +112,26 @@ TEST(FreezeKernels, TransferIsBoundedAndMonotone) {
   EXPECT_NEAR(std::acos(std::min(1.0, g.x / Norm(g))), 0.0, 1e-6);
 }
 
+// gravity_growth tilts the growth direction of ice (not of solids) towards gravity: with the flow
+// sideways, water below an ice particle freezes onto it and water above it does not.
+TEST(FreezeKernels, GravityGrowthFavoursWaterBelowIce) {
+  FreezeParams<double> p = Params();
+  p.growth_sign = -1;
+  p.fr_clamp = true;
+  p.gravity_dir = {0, 0, -1};
+  const Vec3d sideways_flow{1, 0, 0};
+  const Vec3d water_below{0, 0, 0.01}, water_above{0, 0, -0.01};  // x_b − x_j
+  EXPECT_EQ(kernels::FreezingFraction(sideways_flow, true, water_below, p, true), 0.0) << "w = 0 is Eq. 26 alone";
+  p.gravity_growth = 3;
+  const double below = kernels::FreezingFraction(sideways_flow, true, water_below, p, true);
+  EXPECT_NEAR(below, 3 / std::sqrt(10.0), 1e-12) << "direction ĝv + 3ĝ, normalised";
+  EXPECT_EQ(kernels::FreezingFraction(sideways_flow, true, water_above, p, true), 0.0);
+  EXPECT_EQ(kernels::FreezingFraction(sideways_flow, true, water_below, p, false), 0.0) << "glaze on solids ignores gravity";
+  EXPECT_EQ(kernels::FreezingFraction(sideways_flow, false, water_below, p, true), 1.0) << "no recorded flow: straight down";
+  p.growth_sign = 1;  // the printed Eq. 31 grows against the direction, so the tilt flips with it
+  EXPECT_NEAR(kernels::FreezingFraction(-1.0 * sideways_flow, true, water_below, p, true), below, 1e-12);
+}
+
 TEST(FreezeKernels, FreezingFractionAndEnergy) {
   const FreezeParams<double> p = Params();
   std::mt19937 rng(5);

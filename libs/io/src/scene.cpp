@@ -272,6 +272,7 @@ Scene ParseScene(const std::string& text, const fs::path& file) {
     f.drying_rate = t.Number("drying_rate", f.drying_rate, Range::NonNegative());
     f.freeze_delay = t.Number("freeze_delay", f.freeze_delay, Range::Closed(0, 60));
     f.growth_sign = static_cast<int>(t.Integer("growth_sign", f.growth_sign, Range::Closed(-1, 1)));
+    f.gravity_growth = t.Number("gravity_growth", f.gravity_growth, Range::Closed(0, 10));
     if (f.growth_sign == 0) t.Fail("growth_sign", "growth_sign must be +1 or -1");
     f.fr_mode = t.String("fr_mode", f.fr_mode, {"map", "clamp"});
     f.ce_mode = t.String("ce_mode", f.ce_mode, {"dimensionless", "raw"});

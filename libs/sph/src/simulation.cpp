@@ -157,6 +157,9 @@ freeze::FreezeParams<T> MakeFreezeParams(const io::Scene& scene) {
   p.glaze_threshold = T(f.glaze_threshold);
   p.icicle_threshold = T(f.icicle_threshold);
   p.growth_sign = T(f.growth_sign);
+  p.gravity_growth = T(f.gravity_growth);
+  const double g = Norm(scene.solver.gravity);
+  p.gravity_dir = g > 0 && scene.Enabled("gravity") ? ToT<T>(scene.solver.gravity / g) : Vec3<T>{};
   p.fr_clamp = f.fr_mode == "clamp";
   p.ce_raw = f.ce_mode == "raw";
   p.ce_sum = f.ce_aggregation == "sum";

@@ -362,5 +362,38 @@ TEST(Freezing, ResumeWithNucleationDelayIsBitIdentical) {
   EXPECT_EQ(resumed.Positions(), straight->Positions());
 }
 
+// gravity_growth: a stream poured onto the floor keeps landing on the ice it made. Without it the
+// ice grows along the splash, up into the stream, into a mound; with it the ice stays a coat.
+TEST(Freezing, GravityGrowthKeepsAPouredStreamFromPilingUpIce) {
+  auto ice_height = [](double gravity_growth) {
+    io::Scene scene;
+    scene.fluid.spacing = kDp;
+    scene.modules = {"gravity", "viscosity", "freezing"};
+    scene.freezing.glaze_threshold = 0.02;
+    scene.freezing.icicle_threshold = 0.01;
+    scene.freezing.gravity_growth = gravity_growth;
+    io::Emitter e;
+    e.center = {0.36, 0.36, 0.2};
+    e.radius = 0.03;
+    e.speed = 0.5;
+    scene.emitters.push_back(e);
+    io::SolidObject box;
+    box.name = "box";
+    scene.solids.push_back(box);
+    auto sim = Make(scene);
+    const double end = 1.0;
+    while (sim->time() < end - 1e-9) sim->Step(sim->NextTimeStep(end));
+    std::vector<double> z;
+    for (const auto& [id, p] : Observe(*sim).ice) z.push_back(p.z);
+    EXPECT_GT(z.size(), 20u) << "the stream must freeze onto the floor";
+    std::sort(z.begin(), z.end());
+    return z.empty() ? 0.0 : z[z.size() * 9 / 10] / kDp;  // the floor's wall particles are at z = 0
+  };
+  const double mound = ice_height(0), coat = ice_height(3);
+  std::printf("90th percentile of the ice's height above the floor: %.2f spacings without gravity_growth, %.2f with 3\n", mound, coat);
+  EXPECT_LT(coat, 2.0) << "with gravity_growth the ice must stay a coat";
+  EXPECT_GT(mound, coat + 1.0) << "the test scene no longer piles ice up without gravity_growth";
+}
+
 }  // namespace
 }  // namespace rime::sph

@@ -35,6 +35,8 @@ struct FreezeParams {
   T dt_ref;
   T glaze_threshold, icicle_threshold;
   T growth_sign;               // +1 paper, −1 flipped
+  T gravity_growth;            // weight of gravity's direction added to the flow's (0: Eq. 26 alone)
+  Vec3<T> gravity_dir;         // unit vector along gravity (zero without gravity)
   bool fr_clamp;               // fr_mode = "clamp"
   bool ce_raw;                 // ce_mode = "raw" (kg/m³) instead of dimensionless
   bool ce_sum;                 // ce_aggregation = "sum"
@@ -215,11 +217,21 @@ struct DryFilm {
 };
 
 /// Freezing fraction fr_bj (spec §9.5) for boundary b and fluid j.
+/// On ice, `gravity_growth` w > 0 turns the direction into ĝv + w ĝ (ĝ along gravity, in the sense
+/// that grows ice downwards), so water dripping below ice freezes onto it first: the paper's "ice
+/// grows faster, mainly vertically, due to gravity" (icicles). Glaze on solids keeps Eq. 26 alone.
 template <class T>
-RIME_HDI T FreezingFraction(const Vec3<T>& growth, bool valid, const Vec3<T>& x_isf, const FreezeParams<T>& p) {
-  const T len = Norm(x_isf), g = Norm(growth);
+RIME_HDI T FreezingFraction(const Vec3<T>& growth, bool valid, const Vec3<T>& x_isf, const FreezeParams<T>& p, bool on_ice = false) {
+  const T len = Norm(x_isf);
+  Vec3<T> direction = growth;
+  if (on_ice && p.gravity_growth > T(0)) {
+    direction = valid && Norm(growth) > T(0) ? growth / Norm(growth) : Vec3<T>{};
+    direction += p.gravity_dir * (-p.gravity_growth * p.growth_sign);
+    valid = true;
+  }
+  const T g = Norm(direction);
   if (!valid || len < T(1e-6) * p.h || !(g > T(0))) return T(0.5);
-  const T dot = p.growth_sign * Dot(growth, x_isf) / (g * len);
+  const T dot = p.growth_sign * Dot(direction, x_isf) / (g * len);
   if (p.fr_clamp) return dot > T(0) ? dot : T(0);
   return (dot + T(1)) * T(0.5);
 }
@@ -257,9 +269,10 @@ struct PhaseDecision {
       const T f = film[b];
       if (!(f > T(0))) continue;
       const Vec3<T> x_isf = boundary_x[b] - xj;
-      const T fr = FreezingFraction(growth[b], growth_valid[b] != 0, x_isf, params);
+      const bool on_ice = boundary_phase[b] == kIcePhase;
+      const T fr = FreezingFraction(growth[b], growth_valid[b] != 0, x_isf, params, on_ice);
       const T ce = f * fr * anisotropy::Kernel(x_isf, G) * scale;
-      if (boundary_phase[b] == kIcePhase) {
+      if (on_ice) {
         ce_i = params.ce_sum ? ce_i + ce : (ce > ce_i ? ce : ce_i);
         if (ce > best_i) best_i = ce, arg_i = b;
       } else {

@@ -88,6 +88,9 @@ struct FreezingSettings {
   // Ice grows downstream, with the flow (−1), and not where fr < 0 ("clamp"): the paper's pictures
   // and text (docs/physics.md "Freezing fraction"); +1 grows against the flow, a column into falling water.
   int growth_sign = -1;               // −1: with the flow, +1: against it (Eq. 31 as printed)
+  // Weight of gravity's direction added to the flow's growth direction: ice grows downwards too,
+  // so water dripping off ice freezes onto it (docs/physics.md "Freezing fraction").
+  double gravity_growth = 0;
   std::string fr_mode = "clamp";      // "clamp": max(0, dot) | "map": (dot + 1) / 2
   std::string ce_mode = "dimensionless";  // | "raw"
   std::string ce_aggregation = "max";     // | "sum"
