@@ -155,11 +155,22 @@ int main(int argc, char** argv) {
     graph.memory_budget = memory_budget;
     graph.parallel_frames = parallel_frames;
     if (sandbox.enabled()) graph.sandbox = sandbox.root();
-    graph.blender = FindOnPath("blender");
+    // RIME_BLENDER picks a Blender outside PATH (studios keep several versions), or "none" to skip
+    // the preview stage whatever is installed.
+    const char* chosen_blender = std::getenv("RIME_BLENDER");
+    const bool blender_off = chosen_blender && std::string(chosen_blender) == "none";
+    if (chosen_blender && *chosen_blender && !blender_off) {
+      if (!fs::exists(chosen_blender)) throw Error(ExitCode::kBadInput, fmt::format("RIME_BLENDER names {}, which does not exist", chosen_blender));
+      graph.blender = fs::path(chosen_blender);
+    } else if (!blender_off) {
+      graph.blender = FindOnPath("blender");
+    }
     graph.ffmpeg = FindOnPath("ffmpeg");
     const Stage last_stage = only ? *only : *target;
     const bool preview_skipped = last_stage == Stage::kPreview && !graph.blender;
-    if (preview_skipped)
+    if (preview_skipped && blender_off)
+      log::Debug("preview stage skipped: RIME_BLENDER=none");
+    else if (preview_skipped)
       log::Info("preview stage skipped: blender is not on PATH (install Blender 3.4 or newer to get PNG frames, a contact sheet and an MP4)");
     else if (last_stage == Stage::kPreview && !graph.ffmpeg)
       log::Info("ffmpeg is not on PATH: the preview stage renders PNG frames only (no contact sheet, no MP4)");

@@ -58,9 +58,18 @@ class Bake : public ::testing::Test {
     unsetenv("FAKE_FAIL");
     unsetenv("FAKE_SIM_SLEEP");
     unsetenv("FAKE_EMPTY_FRAME");
+    setenv("RIME_BLENDER", "none", 1);  // the fake tools stand in for Rime's; a real Blender would render for seconds a frame
   }
   void TearDown() override {
+    if (!saved_path_.empty()) setenv("PATH", saved_path_.c_str(), 1);
     if (!HasFailure()) fs::remove_all(root_);
+  }
+  /// Puts a fake blender and ffmpeg first on PATH (until TearDown) and lets rime-bake use them.
+  void UseFakePreviewTools() {
+    testing::WriteFakePreviewTools(root_ / "preview_tools");
+    saved_path_ = getenv("PATH");
+    setenv("PATH", ((root_ / "preview_tools").string() + ":" + saved_path_).c_str(), 1);
+    unsetenv("RIME_BLENDER");
   }
 
   fs::path Out() const { return root_ / "out"; }
@@ -107,7 +116,7 @@ class Bake : public ::testing::Test {
   static void Touch(const fs::path& p) { fs::last_write_time(p, fs::last_write_time(p) + std::chrono::seconds(5)); }
 
   fs::path root_, scene_;
-  std::string output_;
+  std::string output_, saved_path_;
 };
 
 using Counts = std::map<std::string, int>;
@@ -361,9 +370,7 @@ TEST_F(Bake, TargetStopsAtItsStageAndCleanRemovesEverything) {
 }
 
 TEST_F(Bake, PreviewRendersEveryCleanedFrameWhenBlenderIsOnPath) {
-  testing::WriteFakePreviewTools(root_ / "preview_tools");
-  const std::string path = getenv("PATH");
-  setenv("PATH", ((root_ / "preview_tools").string() + ":" + path).c_str(), 1);
+  UseFakePreviewTools();
   const int code = RunBake();
   ASSERT_EQ(code, 0) << output_;
   EXPECT_EQ(Invocations()["blender"], kLastFrame + 1) << output_;
@@ -376,8 +383,22 @@ TEST_F(Bake, PreviewRendersEveryCleanedFrameWhenBlenderIsOnPath) {
   EXPECT_TRUE(Invocations().empty()) << output_;
   WriteFile(scene_, ReadFile(scene_) + "[bake]\npreview_width = 640\n");  // only the preview reads [bake]
   ASSERT_EQ(RunBake(), 0) << output_;
-  setenv("PATH", path.c_str(), 1);
   EXPECT_EQ(Invocations(), (Counts{{"blender", kLastFrame + 1}, {"ffmpeg", 2}})) << output_;
+}
+
+// RIME_BLENDER names a Blender outside PATH; "none" skips the preview stage.
+TEST_F(Bake, RimeBlenderPicksTheBlenderOrTurnsPreviewsOff) {
+  UseFakePreviewTools();
+  setenv("RIME_BLENDER", "none", 1);
+  ASSERT_EQ(RunBake("-v"), 0) << output_;
+  EXPECT_EQ(Invocations().count("blender"), 0u) << output_;
+  EXPECT_NE(output_.find("preview stage skipped: RIME_BLENDER=none"), std::string::npos) << output_;
+  setenv("RIME_BLENDER", (root_ / "preview_tools/blender").c_str(), 1);
+  ASSERT_EQ(RunBake(), 0) << output_;
+  EXPECT_EQ(Invocations()["blender"], kLastFrame + 1) << output_;
+  setenv("RIME_BLENDER", (root_ / "no_such_blender").c_str(), 1);
+  EXPECT_EQ(RunBake(), 3) << output_;
+  EXPECT_NE(output_.find("RIME_BLENDER names"), std::string::npos) << output_;
 }
 
 TEST_F(Bake, InterruptStopsTheBakeAndTheRerunResumes) {
@@ -585,15 +606,12 @@ TEST_F(Bake, SandboxRefusesPathsOutsideItBeforeWritingAnything) {
 // The preview's contact sheet and movie run ffmpeg through /bin/sh: the output folder reaches
 // that shell as an argument, never as part of the script, whatever characters it holds.
 TEST_F(Bake, OutputFolderFullOfShellSyntaxReachesNoShell) {
-  testing::WriteFakePreviewTools(root_ / "preview_tools");
-  const std::string path = getenv("PATH");
-  setenv("PATH", ((root_ / "preview_tools").string() + ":" + path).c_str(), 1);
+  UseFakePreviewTools();
   const std::string marker = (root_ / "pwned").string();
   const fs::path out = root_ / fmt::format("out 'q'; touch {0}1; '\"$(touch {0}2)`touch {0}3` %d\n❄ é", marker);
   std::string output;
   const int code = rime::test::Run({RIME_BINARY_DIR "/bin/rime-bake", scene_.string(), "--tools", (root_ / "tools").string(), "-o", out.string()},
                                    root_ / "hostile.txt", output);
-  setenv("PATH", path.c_str(), 1);
   ASSERT_EQ(code, 0) << output;
   for (int k = 1; k <= 3; ++k) EXPECT_FALSE(fs::exists(fmt::format("{}{}", marker, k))) << "an injected command ran";
   EXPECT_TRUE(fs::exists(out / "preview/contact_sheet.png")) << output;
