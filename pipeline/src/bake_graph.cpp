@@ -69,6 +69,15 @@ std::vector<Job> BuildGraph(const SceneDocument& doc, const BakeLayout& layout, 
   const io::Scene& scene = doc.scene();
   const std::string scene_path = layout.scene_file.string();
   std::vector<Job> jobs;
+  // Limits that do not change results: after the key arguments, like -j and --device.
+  const auto limits = [&](Job& job, bool per_frame) {
+    if (options.memory_budget > 0) {
+      const std::uint64_t share = per_frame ? options.memory_budget / std::uint64_t(std::max(1, options.parallel_frames))
+                                            : options.memory_budget;
+      job.args.insert(job.args.end(), {"--memory-budget", std::to_string(std::max<std::uint64_t>(share, 1))});
+    }
+    if (!options.sandbox.empty()) job.args.insert(job.args.end(), {"--sandbox", options.sandbox.string()});
+  };
   const auto add = [&](Job job) {
     job.sections = SectionsReadBy(job.stage, doc);
     job.log = layout.logs() / (job.id + ".log");
@@ -94,6 +103,7 @@ std::vector<Job> BuildGraph(const SceneDocument& doc, const BakeLayout& layout, 
     }
     job.exclusive = true;
     add(std::move(job));
+    limits(jobs.back(), false);
   }
   if (target == Stage::kBoundary) return jobs;
 
@@ -109,6 +119,7 @@ std::vector<Job> BuildGraph(const SceneDocument& doc, const BakeLayout& layout, 
     add(job);  // key_args without --device / -j: they do not change what is computed
     Job& added = jobs.back();
     if (options.device != "auto") added.args.insert(added.args.end(), {"--device", options.device});
+    limits(added, false);
     added.inputs = jobs.front().outputs;
     added.dependencies = {"boundary"};
     for (std::int64_t f = 0; f <= last_frame; ++f) added.outputs.push_back(io::FramePath(layout.sim(), "particles", f, "h5part"));
@@ -162,6 +173,7 @@ std::vector<Job> BuildGraph(const SceneDocument& doc, const BakeLayout& layout, 
         if (has_format(ext)) surface.outputs.push_back(io::FramePath(layout.surface(), phase, f, ext));
     add(surface);
     frame_threads(jobs.back().args);
+    limits(jobs.back(), true);
     if (target == Stage::kSurface) continue;
 
     const fs::path mesh = io::FramePath(layout.surface(), cleaned_phase, f, mesh_format);
@@ -179,6 +191,7 @@ std::vector<Job> BuildGraph(const SceneDocument& doc, const BakeLayout& layout, 
     for (const char* ext : {"obj", "ply", "json"}) cleanup.outputs.push_back(io::FramePath(layout.clean(), cleaned, f, ext));
     add(cleanup);
     frame_threads(jobs.back().args);
+    limits(jobs.back(), true);
     if (!preview) continue;
 
     Job render;

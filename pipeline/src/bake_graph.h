@@ -62,6 +62,11 @@ struct GraphOptions {
   int cpu_threads = 0;                 // threads given to each per-frame tool (0: all cores)
   std::string device = "auto";
   std::optional<std::filesystem::path> blender, ffmpeg;  // preview tools, when found
+  /// --memory-budget in bytes (0: not given; each tool then uses the memory available when it
+  /// starts). Per-frame tools get their share: the budget divided by the frames run at once.
+  std::uint64_t memory_budget = 0;
+  int parallel_frames = 1;
+  std::filesystem::path sandbox;  // --sandbox, passed to every stage tool ("" = off)
 };
 
 /// All jobs of stages up to `target`, in an order where dependencies come first. Preview jobs are

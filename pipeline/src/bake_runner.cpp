@@ -17,6 +17,7 @@
 #include "rime/core/error.h"
 #include "rime/core/hash.h"
 #include "rime/core/log.h"
+#include "rime/core/memory_budget.h"
 #include "rime/core/progress.h"
 #include "rime/io/particles.h"
 
@@ -163,9 +164,11 @@ struct Runner::Impl {
                          FrameSuffix(job), job.log.string()));
       } else {
         const std::string last = LastLogLine(job.log);
-        // A tool that could not write its output (disk full, file too large, permissions) makes
-        // the bake exit with the same code as any other write failure.
-        Fail(job, code == static_cast<int>(ExitCode::kIo) ? code : kExitStageFailed,
+        // A tool that could not write its output (disk full, file too large, permissions), or
+        // that refused to start above its memory budget, passes its code on: both are about the
+        // machine, not the scene.
+        const bool passed_on = code == static_cast<int>(ExitCode::kIo) || code == static_cast<int>(kExitOverBudget);
+        Fail(job, passed_on ? code : kExitStageFailed,
              fmt::format("stage {} failed{} ({} exited with code {}{}); log: {}", StageName(job.stage), FrameSuffix(job), job.tool_name, code,
                          last.empty() ? "" : ": " + last, job.log.string()));
       }

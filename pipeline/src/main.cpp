@@ -18,13 +18,49 @@ namespace fs = std::filesystem;
 using namespace rime;
 using namespace rime::bake;
 
+namespace {
+
+// The output folder and every folder the bake writes under it (one could be a symlink leading
+// out), and each mesh the scene names, resolved the way rime-boundary resolves it.
+void RequireInSandbox(const Sandbox& sandbox, const io::Scene& scene, const BakeLayout& layout) {
+  if (!sandbox.enabled()) return;
+  for (const io::SolidObject& solid : scene.solids)
+    if (solid.shape == "mesh")
+      sandbox.Require(scene.Resolve(solid.mesh), fmt::format("{}: solid '{}' mesh", scene.file.string(), solid.name),
+                      ExitCode::kBadInput);
+  for (const fs::path& folder : {layout.output, layout.cache(), layout.state_folder(), layout.logs(), layout.boundary(),
+                                 layout.sim(), layout.surface(), layout.clean(), layout.preview(), layout.cache() / "preview"})
+    sandbox.Require(folder, "-o", ExitCode::kUsage);
+  for (const char* name : {"state.json", "lock"}) sandbox.Require(layout.state_folder() / name, "-o (bake state)", ExitCode::kUsage);
+}
+
+// Every file a job reads or writes: a file inside the output folder can itself be a symlink.
+// Programs hashed into a key (ffmpeg) are tools, not data, like --tools.
+void RequireInSandbox(const Sandbox& sandbox, const Job& job, const GraphOptions& graph) {
+  if (!sandbox.enabled()) return;
+  const std::string field = fmt::format("-o ({} job)", job.id);
+  for (const auto* paths : {&job.inputs, &job.optional_inputs, &job.outputs})
+    for (const fs::path& p : *paths)
+      if (p != graph.ffmpeg && p != graph.blender) sandbox.Require(p, field, ExitCode::kUsage);
+  sandbox.Require(job.log, field, ExitCode::kUsage);
+}
+
+}  // namespace
+
 int main(int argc, char** argv) {
   CLI::App app{
       "Bakes a scene: boundary -> sim -> surface -> cleanup (-> preview), rerunning only the jobs whose tool, command, scene "
       "sections or input files changed. Outputs go to <output>/surface, <output>/clean and <output>/preview; particles, "
       "logs and the bake state to <output>/cache."};
   tool::CommonOptions common;
-  tool::Setup(app, "rime-bake", common, tool::kDevice | tool::kFrames | tool::kJsonSummary);
+  tool::Setup(app, "rime-bake", common, tool::kDevice | tool::kFrames | tool::kJsonSummary | tool::kMemoryBudget | tool::kSandbox);
+  app.get_option("--memory-budget")
+      ->description("Passed to every stage tool, which refuses to start (exit 10, nothing written) when the peak memory it "
+                    "estimates from its inputs exceeds it; the per-frame stages each get SIZE divided by -j. SIZE: 512M, 4G, "
+                    "1.5GiB or bytes (powers of 1024). Default: each tool takes the memory available when it starts");
+  app.get_option("--sandbox")
+      ->description("Refuse (nothing written) when the scene, a mesh path in the scene, the output folder, the cache or any "
+                    "file a job reads or writes does not resolve inside DIR after following symlinks; passed to every stage tool");
   std::string scene_file, target_name = "all", only_name, output, tools_folder;
   int parallel_frames = 1;
   bool force = false, dry_run = false, explain = false, clean = false;
@@ -58,7 +94,8 @@ int main(int argc, char** argv) {
       "Exit codes: 0 ok (everything up to the target is up to date), 1 internal failure, 2 bad command line, 3 bad scene file or "
       "missing stage tool, 5 cannot write the output or cache, a stage tool could not write its output, or another rime-bake is using the "
       "folder (the message names its pid, host and start time), 7 a stage failed (the message names stage, frame and log), "
-      "8 --only refused (inputs missing or stale), 9 --farm: Slurm's commands missing or a submission refused, 130 interrupted (rerun to continue; the simulation resumes).");
+      "8 --only refused (inputs missing or stale), 9 --farm: Slurm's commands missing or a submission refused, 10 a stage tool refused to "
+      "start above its --memory-budget, 130 interrupted (rerun to continue; the simulation resumes).");
 
   return tool::Main(app, argc, argv, common, [&]() -> int {
     // The farm verbs default to the target and frames of the last submission.
@@ -80,10 +117,14 @@ int main(int argc, char** argv) {
       if (!only) throw Error(ExitCode::kUsage, fmt::format("unknown stage '{}' for --only (boundary, sim, surface, cleanup, preview)", only_name));
     }
 
+    const Sandbox sandbox = tool::MakeSandbox(common);
+    sandbox.Require(scene_file, "scene", ExitCode::kUsage);
+    const std::uint64_t memory_budget = common.memory_budget.empty() ? 0 : ParseByteSize(common.memory_budget);
     const SceneDocument doc = SceneDocument::Load(scene_file);
     BakeLayout layout;
     layout.scene_file = scene_file;
     layout.output = output.empty() ? fs::path("out") / doc.scene().info.name : fs::path(output);
+    RequireInSandbox(sandbox, doc.scene(), layout);
 
     if (clean) {
       RefuseWhileFarmJobsAlive(layout);
@@ -111,11 +152,25 @@ int main(int argc, char** argv) {
       graph.cpu_threads = allocated ? std::max(1, std::atoi(allocated)) : 0;
     }
     graph.device = common.device;
-    graph.blender = FindOnPath("blender");
+    graph.memory_budget = memory_budget;
+    graph.parallel_frames = parallel_frames;
+    if (sandbox.enabled()) graph.sandbox = sandbox.root();
+    // RIME_BLENDER picks a Blender outside PATH (studios keep several versions), or "none" to skip
+    // the preview stage whatever is installed.
+    const char* chosen_blender = std::getenv("RIME_BLENDER");
+    const bool blender_off = chosen_blender && std::string(chosen_blender) == "none";
+    if (chosen_blender && *chosen_blender && !blender_off) {
+      if (!fs::exists(chosen_blender)) throw Error(ExitCode::kBadInput, fmt::format("RIME_BLENDER names {}, which does not exist", chosen_blender));
+      graph.blender = fs::path(chosen_blender);
+    } else if (!blender_off) {
+      graph.blender = FindOnPath("blender");
+    }
     graph.ffmpeg = FindOnPath("ffmpeg");
     const Stage last_stage = only ? *only : *target;
     const bool preview_skipped = last_stage == Stage::kPreview && !graph.blender;
-    if (preview_skipped)
+    if (preview_skipped && blender_off)
+      log::Debug("preview stage skipped: RIME_BLENDER=none");
+    else if (preview_skipped)
       log::Info("preview stage skipped: blender is not on PATH (install Blender 3.4 or newer to get PNG frames, a contact sheet and an MP4)");
     else if (last_stage == Stage::kPreview && !graph.ffmpeg)
       log::Info("ffmpeg is not on PATH: the preview stage renders PNG frames only (no contact sheet, no MP4)");
@@ -160,6 +215,7 @@ int main(int argc, char** argv) {
     if (!dry_run) RefuseWhileFarmJobsAlive(layout);
 
     std::vector<Job> jobs = BuildGraph(doc, layout, graph, last_stage);
+    for (const Job& job : jobs) RequireInSandbox(sandbox, job, graph);
     if (!dry_run && std::any_of(jobs.begin(), jobs.end(), [](const Job& j) { return j.stage == Stage::kPreview; }))
       WritePreviewFiles(doc, layout);
 

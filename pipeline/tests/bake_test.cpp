@@ -58,9 +58,18 @@ class Bake : public ::testing::Test {
     unsetenv("FAKE_FAIL");
     unsetenv("FAKE_SIM_SLEEP");
     unsetenv("FAKE_EMPTY_FRAME");
+    setenv("RIME_BLENDER", "none", 1);  // the fake tools stand in for Rime's; a real Blender would render for seconds a frame
   }
   void TearDown() override {
+    if (!saved_path_.empty()) setenv("PATH", saved_path_.c_str(), 1);
     if (!HasFailure()) fs::remove_all(root_);
+  }
+  /// Puts a fake blender and ffmpeg first on PATH (until TearDown) and lets rime-bake use them.
+  void UseFakePreviewTools() {
+    testing::WriteFakePreviewTools(root_ / "preview_tools");
+    saved_path_ = getenv("PATH");
+    setenv("PATH", ((root_ / "preview_tools").string() + ":" + saved_path_).c_str(), 1);
+    unsetenv("RIME_BLENDER");
   }
 
   fs::path Out() const { return root_ / "out"; }
@@ -107,7 +116,7 @@ class Bake : public ::testing::Test {
   static void Touch(const fs::path& p) { fs::last_write_time(p, fs::last_write_time(p) + std::chrono::seconds(5)); }
 
   fs::path root_, scene_;
-  std::string output_;
+  std::string output_, saved_path_;
 };
 
 using Counts = std::map<std::string, int>;
@@ -361,9 +370,7 @@ TEST_F(Bake, TargetStopsAtItsStageAndCleanRemovesEverything) {
 }
 
 TEST_F(Bake, PreviewRendersEveryCleanedFrameWhenBlenderIsOnPath) {
-  testing::WriteFakePreviewTools(root_ / "preview_tools");
-  const std::string path = getenv("PATH");
-  setenv("PATH", ((root_ / "preview_tools").string() + ":" + path).c_str(), 1);
+  UseFakePreviewTools();
   const int code = RunBake();
   ASSERT_EQ(code, 0) << output_;
   EXPECT_EQ(Invocations()["blender"], kLastFrame + 1) << output_;
@@ -376,8 +383,22 @@ TEST_F(Bake, PreviewRendersEveryCleanedFrameWhenBlenderIsOnPath) {
   EXPECT_TRUE(Invocations().empty()) << output_;
   WriteFile(scene_, ReadFile(scene_) + "[bake]\npreview_width = 640\n");  // only the preview reads [bake]
   ASSERT_EQ(RunBake(), 0) << output_;
-  setenv("PATH", path.c_str(), 1);
   EXPECT_EQ(Invocations(), (Counts{{"blender", kLastFrame + 1}, {"ffmpeg", 2}})) << output_;
+}
+
+// RIME_BLENDER names a Blender outside PATH; "none" skips the preview stage.
+TEST_F(Bake, RimeBlenderPicksTheBlenderOrTurnsPreviewsOff) {
+  UseFakePreviewTools();
+  setenv("RIME_BLENDER", "none", 1);
+  ASSERT_EQ(RunBake("-v"), 0) << output_;
+  EXPECT_EQ(Invocations().count("blender"), 0u) << output_;
+  EXPECT_NE(output_.find("preview stage skipped: RIME_BLENDER=none"), std::string::npos) << output_;
+  setenv("RIME_BLENDER", (root_ / "preview_tools/blender").c_str(), 1);
+  ASSERT_EQ(RunBake(), 0) << output_;
+  EXPECT_EQ(Invocations()["blender"], kLastFrame + 1) << output_;
+  setenv("RIME_BLENDER", (root_ / "no_such_blender").c_str(), 1);
+  EXPECT_EQ(RunBake(), 3) << output_;
+  EXPECT_NE(output_.find("RIME_BLENDER names"), std::string::npos) << output_;
 }
 
 TEST_F(Bake, InterruptStopsTheBakeAndTheRerunResumes) {
@@ -506,18 +527,91 @@ TEST_F(Bake, StageToolThatCannotWriteMakesTheBakeExit5NamingTheFile) {
   EXPECT_EQ(RunBake(), 0) << output_;
 }
 
+TEST_F(Bake, MemoryBudgetReachesEveryToolAsItsShareAndChangesNoKey) {
+  ASSERT_EQ(RunBake("cleanup -j 2 --memory-budget 4G"), 0) << output_;
+  int surfaces = 0, cleanups = 0;
+  for (const std::string& line : InvocationLines()) {
+    const std::string tool = line.substr(0, line.find(' '));
+    // Boundary and simulation run alone with the whole budget; two frames at once share it.
+    const std::string expected = tool == "rime-boundary" || tool == "rime-sim" ? "--memory-budget 4294967296" : "--memory-budget 2147483648";
+    EXPECT_NE(line.find(expected), std::string::npos) << line;
+    surfaces += tool == "rime-surface", cleanups += tool == "rime-clean";
+  }
+  EXPECT_EQ(surfaces, kLastFrame + 1);
+  EXPECT_EQ(cleanups, kLastFrame + 1);
+  // A budget does not change what a tool computes: another one, or none, reruns nothing.
+  ASSERT_EQ(RunBake("cleanup --memory-budget 1G"), 0) << output_;
+  EXPECT_TRUE(Invocations().empty()) << output_;
+  ASSERT_EQ(RunBake("cleanup"), 0) << output_;
+  EXPECT_TRUE(Invocations().empty()) << output_;
+  EXPECT_EQ(RunBake("cleanup --memory-budget 4X"), 2) << output_;
+  EXPECT_NE(output_.find("--memory-budget 4X"), std::string::npos) << output_;
+}
+
+TEST_F(Bake, StageToolOverItsMemoryBudgetMakesTheBakeExit10) {
+  setenv("FAKE_FAIL", "surface:1", 1);
+  setenv("FAKE_FAIL_CODE", "10", 1);
+  EXPECT_EQ(RunBake("cleanup --memory-budget 1G"), 10) << output_;
+  unsetenv("FAKE_FAIL");
+  unsetenv("FAKE_FAIL_CODE");
+  EXPECT_NE(output_.find("rime-bake: error: stage surface failed on frame 1 (rime-surface exited with code 10: rime-surface: error: "
+                         "needs about 2 GiB for 100 M voxels"),
+            std::string::npos)
+      << output_;
+  EXPECT_EQ(RunBake("cleanup"), 0) << output_;
+}
+
+TEST_F(Bake, SandboxRefusesPathsOutsideItBeforeWritingAnything) {
+  const fs::path outside = root_.parent_path() / (root_.filename().string() + "_outside");
+  fs::create_directories(outside);
+  WriteFile(outside / "rock.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+  WriteFile(root_ / "rock.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+  // Up to the cleanup: the preview stage would run a real Blender where one is installed.
+  const std::string sandbox = "cleanup --sandbox '" + root_.string() + "'";
+  const auto expect_refused = [&](int code, const std::string& names) {
+    EXPECT_EQ(RunBake(sandbox), code) << output_;
+    EXPECT_NE(output_.find(names), std::string::npos) << output_;
+    EXPECT_NE(output_.find("outside the sandbox " + root_.string()), std::string::npos) << output_;
+    EXPECT_TRUE(Invocations().empty()) << output_;
+    EXPECT_FALSE(fs::exists(Out() / "cache" / ".rime-bake")) << output_;
+  };
+  // Scene mesh paths: a "../" escape, an absolute path, a symlink that leads out.
+  fs::create_directory_symlink(outside, root_ / "linked");
+  const std::string mesh_field = scene_.string() + ": solid 'rock' mesh ";
+  for (const std::string& mesh : {"../" + outside.filename().string() + "/rock.obj", (outside / "rock.obj").string(), std::string("linked/rock.obj")}) {
+    SCOPED_TRACE(mesh);
+    WriteFile(scene_, std::string(kScene) + "\n[[solid]]\nname = \"rock\"\nshape = \"mesh\"\nmesh = \"" + mesh + "\"\n");
+    expect_refused(3, mesh_field + (scene_.parent_path() / mesh).string());
+  }
+  WriteFile(scene_, std::string(kScene) + "\n[[solid]]\nname = \"rock\"\nshape = \"mesh\"\nmesh = \"rock.obj\"\n");
+  // The cache folder a symlink out of the sandbox.
+  fs::create_directories(Out());
+  fs::create_directory_symlink(outside, Out() / "cache");
+  expect_refused(2, "-o " + (Out() / "cache").string());
+  fs::remove(Out() / "cache");
+  // The output folder given with "../".
+  const std::string escape = std::string("'") + RIME_BINARY_DIR "/bin/rime-bake' '" + scene_.string() + "' --tools '" +
+                             (root_ / "tools").string() + "' -o '" + root_.string() + "/../" + outside.filename().string() +
+                             "/out' " + sandbox + " > /dev/null 2>&1";
+  const int status = std::system(escape.c_str());
+  EXPECT_EQ(WIFEXITED(status) ? WEXITSTATUS(status) : -1, 2);
+  EXPECT_FALSE(fs::exists(outside / "out"));
+  // Inside: the bake runs, and every tool gets the sandbox too.
+  ASSERT_EQ(RunBake(sandbox), 0) << output_;
+  for (const std::string& line : InvocationLines()) EXPECT_NE(line.find("--sandbox " + root_.string()), std::string::npos) << line;
+  EXPECT_EQ(Invocations(), kEverything);
+  fs::remove_all(outside);
+}
+
 // The preview's contact sheet and movie run ffmpeg through /bin/sh: the output folder reaches
 // that shell as an argument, never as part of the script, whatever characters it holds.
 TEST_F(Bake, OutputFolderFullOfShellSyntaxReachesNoShell) {
-  testing::WriteFakePreviewTools(root_ / "preview_tools");
-  const std::string path = getenv("PATH");
-  setenv("PATH", ((root_ / "preview_tools").string() + ":" + path).c_str(), 1);
+  UseFakePreviewTools();
   const std::string marker = (root_ / "pwned").string();
   const fs::path out = root_ / fmt::format("out 'q'; touch {0}1; '\"$(touch {0}2)`touch {0}3` %d\n❄ é", marker);
   std::string output;
   const int code = rime::test::Run({RIME_BINARY_DIR "/bin/rime-bake", scene_.string(), "--tools", (root_ / "tools").string(), "-o", out.string()},
                                    root_ / "hostile.txt", output);
-  setenv("PATH", path.c_str(), 1);
   ASSERT_EQ(code, 0) << output;
   for (int k = 1; k <= 3; ++k) EXPECT_FALSE(fs::exists(fmt::format("{}{}", marker, k))) << "an injected command ran";
   EXPECT_TRUE(fs::exists(out / "preview/contact_sheet.png")) << output;

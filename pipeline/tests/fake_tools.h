@@ -38,7 +38,7 @@ max = [0.2, 0.2, 0.3]
 )";
 
 // FAKE_FAIL=<stage>:<frame> makes that stage fail on that frame (FAKE_FAIL_CODE: the surface's exit
-// code, default 3; 5 says it could not write); FAKE_SIM_SLEEP slows each frame.
+// code, default 3; 5 says it could not write, 10 that it is over its memory budget); FAKE_SIM_SLEEP slows each frame.
 constexpr const char* kPreamble = R"SH(#!/bin/bash
 set -e
 echo "$(basename "$0") $*" >> "$FAKE_LOG"
@@ -75,6 +75,7 @@ input=$1; out=$3; scene=$5
 frame=$(basename "$input" | sed -E 's/particles\.([0-9]+)\.h5part/\1/')
 if fail_here surface $((10#$frame)); then
   if [ "${FAKE_FAIL_CODE:-3}" = 5 ]; then echo "rime-surface: error: cannot write VDB file: No space left on device ($out/ice.$frame.vdb)" >&2; exit 5; fi
+  if [ "${FAKE_FAIL_CODE:-3}" = 10 ]; then echo "rime-surface: error: needs about 2 GiB for 100 M voxels (frame $input, voxel 1 mm), budget 1 GiB (--memory-budget)" >&2; exit 10; fi
   echo "rime-surface: error: no particles in frame (fake) ($input)" >&2; exit 3
 fi
 mkdir -p "$out"

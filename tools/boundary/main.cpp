@@ -10,6 +10,7 @@
 #include "rime/boundary/shapes.h"
 #include "rime/core/error.h"
 #include "rime/core/log.h"
+#include "rime/core/memory_budget.h"
 #include "rime/core/progress.h"
 #include "rime/exec/device.h"
 #include "rime/io/scene.h"
@@ -67,13 +68,30 @@ nlohmann::json Summarize(const boundary::BoundaryObject& o, const fs::path& file
           {"seconds", o.seconds}};
 }
 
+// Peak bytes of sampling one object: the imported mesh with its weld table and edges per triangle;
+// samples with normals, Z-curve keys, the duplicate-removal grid and the volume neighbour lists
+// per particle. Calibrated against measured peaks in docs/reliability.md.
+double SamplingBytes(double triangles, double particles) { return triangles * 100 + particles * 120; }
+
 int Run(const Options& opt, const tool::CommonOptions& common) {
   const auto start = std::chrono::steady_clock::now();
+  const Sandbox sandbox = tool::MakeSandbox(common);
+  sandbox.Require(opt.input, "input", ExitCode::kUsage);
+  sandbox.Require(opt.output, "-o", ExitCode::kUsage);
+  const MemoryBudget budget = tool::Budget(common);
   boundary::BoundarySettings settings;
   settings.device = exec::SelectDevice(common.device);
   if (!(opt.max_particles >= 1)) throw Error(ExitCode::kUsage, "--max-particles must be at least 1");
   settings.max_particles = static_cast<std::uint64_t>(opt.max_particles);
   const fs::path input(opt.input), output(opt.output);
+  // Objects are all built before any is written, so the ones built so far stay in memory.
+  double held_bytes = 0;
+  settings.before_sampling = [&](double triangles, double particles, const std::string& where) {
+    CheckMemoryBudget(budget, held_bytes + SamplingBytes(triangles, particles),
+                      fmt::format("{} triangles and {} particles", FormatCount(triangles), FormatCount(particles)),
+                      fmt::format("{}, spacing {:.3g} mm", where, settings.particle_spacing * 1e3));
+  };
+  const auto hold = [&](const boundary::BoundaryObject& object) { held_bytes += double(object.size()) * 40; };
 
   // Every object is built before anything is written, so bad input leaves no output behind.
   std::vector<std::pair<boundary::BoundaryObject, fs::path>> objects;
@@ -94,7 +112,11 @@ int Run(const Options& opt, const tool::CommonOptions& common) {
       io::SolidObject solid = scene.solids[k];
       if (opt.spacing_ratio) solid.spacing_ratio = *opt.spacing_ratio;
       const fs::path mesh_path = solid.shape == "mesh" ? scene.Resolve(solid.mesh) : fs::path();
+      if (solid.shape == "mesh")
+        sandbox.Require(mesh_path, fmt::format("{}: solid '{}' mesh", input.string(), solid.name), ExitCode::kBadInput);
+      sandbox.Require(output / (solid.name + ".h5part"), "-o", ExitCode::kUsage);
       objects.emplace_back(boundary::BuildBoundaryObject(solid, std::uint32_t(k), mesh_path, settings), output / (solid.name + ".h5part"));
+      hold(objects.back().first);
       progress.Update(Index(k + 1), solid.name);
     }
     progress.Finish();
@@ -150,7 +172,7 @@ int main(int argc, char** argv) {
       "  rime-boundary SCENE.toml -o FOLDER     every [[solid]] of a scene: FOLDER/<solid name>.h5part"};
   tool::CommonOptions common;
   Options opt;
-  tool::Setup(app, "rime-boundary", common, tool::kThreads | tool::kDevice | tool::kJsonSummary);
+  tool::Setup(app, "rime-boundary", common, tool::kThreads | tool::kDevice | tool::kJsonSummary | tool::kMemoryBudget | tool::kSandbox);
   app.add_option("input", opt.input, "A mesh file, or a scene file (.toml)")->required();
   app.add_option("-o,--output", opt.output, "Output .h5part file (mesh) or folder (scene)")->required();
   app.add_option("--spacing", opt.spacing,

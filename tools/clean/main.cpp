@@ -3,10 +3,14 @@
 // write meshes, reports and a summary.
 #include <tbb/parallel_for.h>
 
+#include <fmt/format.h>
+
 #include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <filesystem>
+#include <fstream>
+#include <sstream>
 #include <mutex>
 #include <optional>
 #include <regex>
@@ -14,6 +18,7 @@
 #include "rime/core/atomic_file.h"
 #include "rime/core/error.h"
 #include "rime/core/log.h"
+#include "rime/core/memory_budget.h"
 #include "rime/core/progress.h"
 #include "rime/exec/device.h"
 #include "rime/io/mesh.h"
@@ -99,6 +104,38 @@ struct Overrides {
   }
 };
 
+/// Triangles a mesh file holds, counted without reading it into memory: a PLY's `element face`
+/// count, an OBJ's `f` lines (a polygon of k corners counts k - 2). An unreadable file counts 0 and
+/// is refused later by the reader, with its own message.
+double CountTriangles(const fs::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::string line;
+  double triangles = 0;
+  if (path.extension() == ".ply" || path.extension() == ".PLY") {
+    for (int lines = 0; lines < 10000 && std::getline(in, line) && line.rfind("end_header", 0) != 0; ++lines) {
+      std::istringstream words(line);
+      std::string element, name;
+      double count = 0;
+      if (words >> element >> name >> count && element == "element" && name == "face") triangles = count;
+    }
+    return triangles;
+  }
+  while (std::getline(in, line)) {
+    if (line.size() < 2 || line[0] != 'f' || (line[1] != ' ' && line[1] != '\t')) continue;
+    std::istringstream words(line.substr(2));
+    int corners = 0;
+    for (std::string w; words >> w;) ++corners;
+    triangles += std::max(0, corners - 2);
+  }
+  return triangles;
+}
+
+// Peak bytes of cleaning a mesh of this many triangles: the input mesh, CGAL's Surface_mesh with
+// its property maps, the AABB tree for the velocity transfer and the decimation and
+// self-intersection scratch. Measured with the default steps: about 225 B per triangle above the
+// process's base (docs/reliability.md); 300 B leaves room for the repair and remesh paths.
+double CleanBytes(double triangles) { return triangles * 300; }
+
 /// Adds the file to an error raised without one (meshfix does not know file names).
 [[noreturn]] void Rethrow(const Error& e, const fs::path& file) {
   throw Error(e.code(), e.message(), e.where().empty() ? file.string() : e.where());
@@ -113,7 +150,7 @@ int main(int argc, char** argv) {
       "self-intersections. Per-vertex velocities (PLY vx vy vz) are carried to the output from the nearest input point.\n"
       "Lengths in m, areas in m^2, volumes in m^3. Defaults come from [cleanup] of --scene, else the built-in ones shown."};
   tool::CommonOptions common;
-  tool::Setup(app, "rime-clean", common, tool::kThreads | tool::kFrames | tool::kJsonSummary);
+  tool::Setup(app, "rime-clean", common, tool::kThreads | tool::kFrames | tool::kJsonSummary | tool::kMemoryBudget | tool::kSandbox);
   app.get_option("-j")->description("Frames cleaned in parallel, and CPU threads in all (default: all cores)");
 
   std::vector<std::string> inputs;
@@ -183,6 +220,12 @@ int main(int argc, char** argv) {
 
   return tool::Main(app, argc, argv, common, [&]() -> int {
     const auto start = std::chrono::steady_clock::now();
+    const Sandbox sandbox = tool::MakeSandbox(common);
+    for (const std::string& in : inputs) sandbox.Require(in, "input", ExitCode::kUsage);
+    sandbox.Require(output, "-o", ExitCode::kUsage);
+    if (!scene_file.empty()) sandbox.Require(scene_file, "--scene", ExitCode::kUsage);
+    if (!report_file.empty()) sandbox.Require(report_file, "--report", ExitCode::kUsage);
+    const MemoryBudget budget = tool::Budget(common);
     io::CleanupSettings settings;
     if (!scene_file.empty()) settings = io::LoadScene(scene_file).cleanup;
     o.ApplyTo(settings);
@@ -232,6 +275,20 @@ int main(int argc, char** argv) {
         if (fs::exists(o, ec) && fs::equivalent(o, f.input, ec))
           throw Error(ExitCode::kUsage, "output would overwrite its input", o.string());
     }
+    // Before anything is written: the frames cleaned side by side (one per thread) must fit.
+    std::vector<double> triangles(frames.size()), estimates(frames.size());
+    for (std::size_t i = 0; i < frames.size(); ++i) {
+      for (const fs::path& o : frames[i].outputs) sandbox.Require(o, "-o", ExitCode::kUsage);
+      if (!frames[i].report.empty()) sandbox.Require(frames[i].report, "-o", ExitCode::kUsage);
+      triangles[i] = CountTriangles(frames[i].input);
+      estimates[i] = CleanBytes(triangles[i]);
+    }
+    const std::size_t at_once = std::min<std::size_t>(frames.size(), std::size_t(std::max(1, exec::CpuThreads())));
+    std::size_t largest = 0;
+    const double peak = ConcurrentPeak(estimates, at_once, &largest);
+    CheckMemoryBudget(budget, peak, FormatCount(ConcurrentPeak(triangles, at_once)) + " triangles",
+                      at_once > 1 ? fmt::format("{} meshes at once, largest {}", at_once, frames[largest].input.string())
+                                  : fmt::format("mesh {}", frames[largest].input.string()));
     log::Info("cleaning {} frame(s) with {} thread(s)", frames.size(), exec::CpuThreads());
     std::vector<nlohmann::json> reports(frames.size());
     std::vector<std::string> lines(frames.size());

@@ -29,9 +29,21 @@ void Setup(CLI::App& app, const std::string& name, CommonOptions& options, unsig
         ->capture_default_str();
   if (flags & kFrames) app.add_option("--frames", options.frames, "Frame range A-B (or a single frame A); default: all");
   if (flags & kJsonSummary) app.add_option("--json-summary", options.json_summary, "Also write the end-of-run summary as JSON to FILE");
+  if (flags & kMemoryBudget)
+    app.add_option("--memory-budget", options.memory_budget,
+                   "Refuse to start (exit 10, nothing written) when the peak memory estimated from the inputs exceeds SIZE: "
+                   "512M, 4G, 1.5GiB or bytes (K, M, G, T are powers of 1024). Default: the memory available now "
+                   "(MemAvailable, or less when a cgroup memory limit leaves less)")
+        ->type_name("SIZE");
+  if (flags & kSandbox)
+    app.add_option("--sandbox", options.sandbox,
+                   "Refuse (nothing written) any input or output path, scene paths included, that does not resolve inside "
+                   "DIR after following symlinks")
+        ->type_name("DIR");
   app.footer(
       "Exit codes: 0 ok, 1 internal failure, 2 bad command line, 3 bad input file or scene value, 4 simulation "
-      "diverged, 5 cannot write output, 6 requested device unusable, 130 interrupted.");
+      "diverged, 5 cannot write output, 6 requested device unusable, 10 estimated memory above --memory-budget, "
+      "130 interrupted.");
 }
 
 void Apply(const CommonOptions& options) {
@@ -79,6 +91,15 @@ FrameRange ParseFrames(const std::string& text) {
 
 void WriteSummary(const CommonOptions& options, const nlohmann::json& summary) {
   if (!options.json_summary.empty()) WriteFileAtomically(options.json_summary, summary.dump(2) + "\n");
+}
+
+MemoryBudget Budget(const CommonOptions& options) { return ResolveMemoryBudget(options.memory_budget); }
+
+Sandbox MakeSandbox(const CommonOptions& options) {
+  if (options.sandbox.empty()) return {};
+  Sandbox sandbox{std::filesystem::path(options.sandbox)};
+  if (!options.json_summary.empty()) sandbox.Require(options.json_summary, "--json-summary", ExitCode::kUsage);
+  return sandbox;
 }
 
 std::uint64_t PeakMemoryBytes() {

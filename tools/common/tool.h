@@ -12,6 +12,9 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
+#include "rime/core/memory_budget.h"
+#include "rime/core/sandbox.h"
+
 namespace rime::tool {
 
 struct CommonOptions {
@@ -21,9 +24,11 @@ struct CommonOptions {
   std::string device = "auto";
   std::string frames;       // "A-B", "A" or "" (all)
   std::string json_summary; // path or ""
+  std::string memory_budget;  // --memory-budget SIZE, "" = the available memory
+  std::string sandbox;        // --sandbox DIR, "" = off
 };
 
-enum CommonFlags : unsigned { kThreads = 1, kDevice = 2, kFrames = 4, kJsonSummary = 8 };
+enum CommonFlags : unsigned { kThreads = 1, kDevice = 2, kFrames = 4, kJsonSummary = 8, kMemoryBudget = 16, kSandbox = 32 };
 
 /// Creates the app with --version, --quiet, --verbose and the selected common flags.
 void Setup(CLI::App& app, const std::string& name, CommonOptions& options, unsigned flags);
@@ -44,6 +49,11 @@ FrameRange ParseFrames(const std::string& text);
 
 /// Writes the JSON summary atomically if --json-summary was given.
 void WriteSummary(const CommonOptions& options, const nlohmann::json& summary);
+
+/// The budget --memory-budget names, else what the machine can give now.
+MemoryBudget Budget(const CommonOptions& options);
+/// The --sandbox folder (off when not given); checks --json-summary against it.
+Sandbox MakeSandbox(const CommonOptions& options);
 
 /// Peak resident memory of this process, bytes.
 std::uint64_t PeakMemoryBytes();

@@ -11,11 +11,13 @@
 #include "rime/core/atomic_file.h"
 #include "rime/core/error.h"
 #include "rime/core/log.h"
+#include "rime/core/memory_budget.h"
 #include "rime/core/progress.h"
 #include "rime/exec/device.h"
 #include "rime/io/particles.h"
 #include "rime/io/scene.h"
 #include "rime/sph/simulation.h"
+#include "memory_estimate.h"
 #include "tool.h"
 
 namespace fs = std::filesystem;
@@ -81,20 +83,38 @@ class FrameWriter {
 };
 
 template <class T>
-int Run(const rime::io::Scene& scene, const Options& opt, const rime::tool::CommonOptions& common) {
+int Run(const rime::io::Scene& scene, const Options& opt, const rime::tool::CommonOptions& common, const rime::Sandbox& sandbox,
+        const rime::MemoryBudget& budget) {
   using namespace rime;
   const exec::Device device = exec::SelectDevice(common.device);
-  sph::Simulation<T> sim(scene, device);
   // Default: the "boundary" folder beside the output folder (how rime-bake lays out its cache).
   const fs::path boundary_dir =
       opt.boundary_dir.empty() ? fs::path(opt.output).lexically_normal().parent_path() / "boundary" : fs::path(opt.boundary_dir);
+  std::vector<io::ParticleFrame> boundaries;
+  double boundary_particles = 0;
   for (const io::SolidObject& solid : scene.solids) {
     const fs::path file = boundary_dir / (solid.name + ".h5part");
+    sandbox.Require(file, "--boundary", ExitCode::kUsage);
     if (!fs::exists(file))
       throw InputError(fmt::format("boundary file for solid '{}' not found; run rime-boundary {} -o {} first", solid.name,
                                    scene.file.string(), boundary_dir.string()),
                        file.string());
-    sim.AddBoundaryObject(io::ReadParticleFrame(file, "boundary"), solid.name);
+    boundaries.push_back(io::ReadParticleFrame(file, "boundary"));
+    boundary_particles += double(boundaries.back().size());
+  }
+  // Refused before the simulation allocates its arrays and before any frame is written.
+  SimulationCounts counts;
+  counts.fluid = ExpectedFluidParticles(scene);
+  counts.boundary = boundary_particles;
+  counts.freezing = scene.Enabled("freezing");
+  counts.scalar_bytes = sizeof(T);
+  CheckMemoryBudget(budget, EstimateSimulationBytes(counts),
+                    fmt::format("{} water and {} boundary particles", FormatCount(counts.fluid), FormatCount(counts.boundary)),
+                    fmt::format("scene {}, spacing {:.3g} mm", scene.file.string(), scene.fluid.spacing * 1e3));
+  sph::Simulation<T> sim(scene, device);
+  for (std::size_t k = 0; k < boundaries.size(); ++k) {
+    sim.AddBoundaryObject(boundaries[k], scene.solids[k].name);
+    boundaries[k] = {};
   }
   const fs::path out(opt.output);
   fs::create_directories(out);
@@ -243,7 +263,8 @@ int main(int argc, char** argv) {
                "(open it in ParaView) and FOLDER/stats.jsonl. Every frame is a complete checkpoint."};
   rime::tool::CommonOptions common;
   Options opt;
-  rime::tool::Setup(app, "rime-sim", common, rime::tool::kThreads | rime::tool::kDevice | rime::tool::kJsonSummary);
+  rime::tool::Setup(app, "rime-sim", common,
+                    rime::tool::kThreads | rime::tool::kDevice | rime::tool::kJsonSummary | rime::tool::kMemoryBudget | rime::tool::kSandbox);
   app.add_option("scene", opt.scene, "Scene file (TOML)")->required()->check(CLI::ExistingFile);
   app.add_option("-o,--output", opt.output, "Output folder for the frames")->required();
   app.add_option("--boundary", opt.boundary_dir, "Folder with the boundary files written by rime-boundary (default: OUTPUT/../boundary)");
@@ -252,7 +273,13 @@ int main(int argc, char** argv) {
   std::signal(SIGINT, OnInterrupt);
   std::signal(SIGTERM, OnInterrupt);
   return rime::tool::Main(app, argc, argv, common, [&] {
+    const rime::Sandbox sandbox = rime::tool::MakeSandbox(common);
+    sandbox.Require(opt.scene, "scene", rime::ExitCode::kUsage);
+    sandbox.Require(opt.output, "-o", rime::ExitCode::kUsage);
+    if (!opt.boundary_dir.empty()) sandbox.Require(opt.boundary_dir, "--boundary", rime::ExitCode::kUsage);
+    const rime::MemoryBudget budget = rime::tool::Budget(common);
     const rime::io::Scene scene = rime::io::LoadScene(opt.scene);
-    return scene.fluid.precision == "double" ? Run<double>(scene, opt, common) : Run<float>(scene, opt, common);
+    return scene.fluid.precision == "double" ? Run<double>(scene, opt, common, sandbox, budget)
+                                             : Run<float>(scene, opt, common, sandbox, budget);
   });
 }

@@ -14,6 +14,7 @@
 
 #include "rime/core/error.h"
 #include "rime/core/log.h"
+#include "rime/core/memory_budget.h"
 #include "rime/core/progress.h"
 #include "rime/exec/device.h"
 #include "rime/io/mesh.h"
@@ -34,7 +35,7 @@ struct Options {
   std::string scene;
   std::string phase;
   std::string field;
-  double voxel_size = -1, r_iso = -1, lambda = -1, k_r = -1, k_s = -1, k_n = -1, iso = -1, memory_budget_gb = -1;
+  double voxel_size = -1, r_iso = -1, lambda = -1, k_r = -1, k_s = -1, k_n = -1, iso = -1;
   int resolution = -1, n_eps = -1, smooth = -1;
   double close = -1;
   bool velocity = false, density = false, strict = false, keep_voids = false;
@@ -122,13 +123,49 @@ struct FrameReport {
   std::vector<std::string> files;
 };
 
+// Refuses, before any output exists, when the frames that run side by side would need more memory
+// than the budget: each frame's estimate comes from the grid leaves its particles touch.
+void CheckMemory(const std::vector<FrameFile>& frames, const std::vector<PhaseJob>& jobs, const surface::Settings& settings,
+                 const surface::SelectOptions& select, const MemoryBudget& budget) {
+  std::vector<double> estimates(frames.size());
+  std::vector<double> voxels(frames.size());
+  std::vector<double> voxel_sizes(frames.size());
+  tbb::parallel_for(std::size_t(0), frames.size(), [&](std::size_t k) {
+    const io::ParticleFrame frame = io::ReadParticleFrame(frames[k].path, "particles");
+    for (const PhaseJob& job : jobs) {
+      std::vector<std::string> ignored;  // SelectPhase warns again when the frame is surfaced
+      const surface::ParticleSet particles = surface::SelectPhase(frame, job.phase, select, ignored);
+      surface::Settings s = settings;
+      s.field = job.field;
+      std::uint64_t v = 0;
+      const double bytes = double(surface::EstimateMemoryBytes(particles, s, &v));
+      // Phases of a frame are surfaced one after the other: the larger one sets the peak.
+      if (bytes > estimates[k]) {
+        estimates[k] = bytes;
+        voxels[k] = double(v);
+        voxel_sizes[k] = particles.size() ? surface::VoxelSize(particles, s) : 0;
+      }
+    }
+  });
+  // Frames run side by side, up to one per thread: the largest ones may meet.
+  const std::size_t concurrent = std::min<std::size_t>(frames.size(), std::size_t(std::max(1, exec::CpuThreads())));
+  std::size_t worst = 0;
+  const double total = ConcurrentPeak(estimates, concurrent, &worst);
+  const double total_voxels = ConcurrentPeak(voxels, concurrent);
+  const std::string context =
+      concurrent > 1 ? fmt::format("{} frames at once, largest {}, voxel {:.3g} mm", concurrent, frames[worst].path.string(),
+                                   voxel_sizes[worst] * 1e3)
+                     : fmt::format("frame {}, voxel {:.3g} mm", frames[worst].path.string(), voxel_sizes[worst] * 1e3);
+  CheckMemoryBudget(budget, total, FormatCount(total_voxels) + " voxels", context);
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
   CLI::App app{"Turns ice (and water) particles of rime-sim frames into OpenVDB level sets and triangle meshes "
                "(anisotropic ellipsoids, spec §10)."};
   tool::CommonOptions common;
-  tool::Setup(app, "rime-surface", common, tool::kThreads | tool::kFrames | tool::kJsonSummary);
+  tool::Setup(app, "rime-surface", common, tool::kThreads | tool::kFrames | tool::kJsonSummary | tool::kMemoryBudget | tool::kSandbox);
   Options o;
   app.add_option("frames", o.inputs, "Particle frames (NAME.NNNN.h5part), a folder of them, or the sequence index NAME.h5part")
       ->required();
@@ -159,15 +196,20 @@ int main(int argc, char** argv) {
   app.add_flag("--vel", o.velocity, "Add a `vel` vec3 grid (particle velocities, for motion blur) to the VDB");
   app.add_flag("--density", o.density, "Add a `density` fog grid (Blender's volume shader shows it without setup)");
   app.add_option("--format", o.formats, "Comma-separated outputs among obj, ply, vdb (default obj,vdb)");
-  app.add_option("--memory-budget", o.memory_budget_gb, "Refuse frames whose estimated peak memory exceeds this many GB (default: no limit)")
-      ->check(CLI::PositiveNumber);
   app.add_flag("--strict", o.strict, "Refuse ice frames without stored anisotropy instead of falling back to isotropic");
   app.add_flag("--keep-voids", o.keep_voids, "Keep enclosed gaps between ellipsoids as voids (inner shells in the mesh)");
 
   return tool::Main(app, argc, argv, common, [&]() -> int {
     const auto start = std::chrono::steady_clock::now();
+    const Sandbox sandbox = tool::MakeSandbox(common);
+    for (const std::string& input : o.inputs) sandbox.Require(input, "input", ExitCode::kUsage);
+    sandbox.Require(o.output, "-o", ExitCode::kUsage);
+    if (!o.scene.empty()) sandbox.Require(o.scene, "--scene", ExitCode::kUsage);
+    MemoryBudget budget = tool::Budget(common);
     io::SurfaceSettings defaults;
     if (!o.scene.empty()) defaults = io::LoadScene(o.scene).surface;
+    if (common.memory_budget.empty() && defaults.memory_budget_gb > 0)
+      budget = {std::uint64_t(defaults.memory_budget_gb * 1e9), o.scene + ": surface.memory_budget_gb"};
     const std::string phase = o.phase.empty() ? defaults.phase : o.phase;
     std::vector<std::string> formats = defaults.formats;
     if (!o.formats.empty()) {
@@ -202,7 +244,6 @@ int main(int argc, char** argv) {
     settings.mesh = has("obj") || has("ply");
     settings.mesh_velocities = has("ply");
     settings.keep_voids = o.keep_voids;
-    const double budget_gb = o.memory_budget_gb > 0 ? o.memory_budget_gb : defaults.memory_budget_gb;
 
     std::vector<PhaseJob> jobs;
     const auto field_for = [&](const std::string& phase_default) {
@@ -213,12 +254,14 @@ int main(int argc, char** argv) {
 
     const tool::FrameRange range = tool::ParseFrames(common.frames);
     const std::vector<FrameFile> frames = CollectFrames(o.inputs, range, !common.frames.empty());
+    for (const FrameFile& f : frames) sandbox.Require(f.path, "input frame", ExitCode::kUsage);
+    surface::SelectOptions select;
+    select.strict = o.strict;
+    CheckMemory(frames, jobs, settings, select, budget);
     std::error_code ec;
     fs::create_directories(o.output, ec);
     if (ec || !fs::is_directory(o.output)) throw IoError("cannot create the output folder", o.output);
 
-    surface::SelectOptions select;
-    select.strict = o.strict;
     std::mutex mutex;
     std::vector<FrameReport> reports;
     Progress progress("frames", Index(frames.size()));
@@ -235,16 +278,6 @@ int main(int argc, char** argv) {
                     job.prefix);
         surface::Settings s = settings;
         s.field = job.field;
-        if (budget_gb > 0) {
-          // Frames run side by side: each may use its share of the budget only.
-          const double concurrent = double(std::min<std::size_t>(frames.size(), std::size_t(std::max(1, exec::CpuThreads()))));
-          const double estimate = double(surface::EstimateMemoryBytes(particles, s)) * concurrent;
-          if (estimate > budget_gb * 1e9)
-            throw InputError(fmt::format("frame {} {}: estimated peak memory {:.2f} GB exceeds --memory-budget {:.2f} GB at voxel "
-                                         "size {:.4g} m; use a larger --voxel-size",
-                                         frame.frame, job.prefix, estimate / 1e9, budget_gb, surface::VoxelSize(particles, s)),
-                             ff.path.string());
-        }
         const surface::Result result = surface::Reconstruct(particles, s);
         FrameReport report;
         report.frame = frame.frame;

@@ -76,6 +76,8 @@ BoundaryObject BuildBoundaryObject(const io::SolidObject& object, std::uint32_t 
                                    "(use a larger spacing or raise --max-particles)",
                                    out.boundary_spacing, estimate, settings.max_particles),
                        where);
+    // A tessellation at d_b has about two triangles per particle.
+    if (settings.before_sampling) settings.before_sampling(2 * estimate, estimate, where);
     // Tessellate so that edges are at most d_b after the transform's scale.
     const double stretch = MakeTransform(object.transform).MaxStretch();
     parts.push_back(MakeProceduralMesh(object, out.boundary_spacing / std::max(stretch, 1e-30)));
@@ -83,11 +85,15 @@ BoundaryObject BuildBoundaryObject(const io::SolidObject& object, std::uint32_t 
     out.mesh_hash = HexHash(Hash64(ProceduralKey(object)));
   }
 
-  SurfaceSamples samples;
-  for (io::TriMesh& part : parts) {
-    ApplyTransform(part, object.transform);
-    Append(samples, SampleSurface(part, options));
+  for (io::TriMesh& part : parts) ApplyTransform(part, object.transform);
+  if (settings.before_sampling && from_file) {
+    double triangles = 0, particles = 0;
+    for (const io::TriMesh& part : parts) triangles += double(part.triangle_count()), particles += EstimateSampleCount(part, options.spacing);
+    // Beyond --max-particles the sampler refuses the input itself (exit 3), before any memory.
+    if (particles <= double(settings.max_particles)) settings.before_sampling(triangles, particles, where);
   }
+  SurfaceSamples samples;
+  for (io::TriMesh& part : parts) Append(samples, SampleSurface(part, options));
   if (samples.positions.size() > settings.max_particles)
     throw InputError(fmt::format("{} boundary particles, more than the maximum {}", samples.positions.size(), settings.max_particles),
                      where);

@@ -538,9 +538,10 @@ std::vector<float> ReachVoxels(const ParticleSet& particles, const Settings& s, 
 
 }  // namespace
 
-std::uint64_t EstimateMemoryBytes(const ParticleSet& particles, const Settings& settings) {
+std::uint64_t EstimateMemoryBytes(const ParticleSet& particles, const Settings& settings, std::uint64_t* voxels) {
   CheckSettings(particles, settings);
   const std::size_t n = particles.size();
+  if (voxels) *voxels = 0;
   if (n == 0) return 0;
   const double dx = VoxelSize(particles, settings);
   const double h = particles.smoothing_length > 0 ? particles.smoothing_length : particles.spacing;
@@ -548,6 +549,7 @@ std::uint64_t EstimateMemoryBytes(const ParticleSet& particles, const Settings& 
       ReachVoxels(particles, settings, nullptr, dx, float(settings.r_iso * particles.spacing / dx), float(settings.half_band),
                   float(h / dx));
   const Plan plan = MakePlan(particles.positions, reach, dx);
+  if (voxels) *voxels = plan.targets.size() * 512;
   // Per leaf: float values + masks (surface, inside, erosion copies) + node overhead; the mesh is
   // bounded by the surface leaves (about 2 triangles and one vertex per surface voxel).
   const double leaf_bytes = 512 * 4 + 64 * (4 + std::ceil(settings.half_band)) + 96 +

@@ -123,3 +123,66 @@ TEST_F(RimeBoundaryTool, UsageErrors) {
 }
 
 }  // namespace
+
+namespace {
+
+TEST_F(RimeBoundaryTool, RefusesAboveTheMemoryBudgetWithoutOutput) {
+  // A unit tetrahedron at d_b = 1 mm: about 2.4 M particles, hundreds of MB.
+  const Result mesh = Run((dir_ / "tetra.obj").string() + " -o " + (dir_ / "tetra.h5part").string() +
+                          " --spacing 0.002 --memory-budget 1M");
+  EXPECT_EQ(mesh.code, 10) << mesh.err;
+  EXPECT_NE(mesh.err.find("rime-boundary: error: needs about "), std::string::npos) << mesh.err;
+  EXPECT_NE(mesh.err.find(" triangles and 2.37 M particles (" + (dir_ / "tetra.obj").string() +
+                          ", spacing 2 mm), budget 1 MiB (--memory-budget)"),
+            std::string::npos)
+      << mesh.err;
+  EXPECT_FALSE(fs::exists(dir_ / "tetra.h5part"));
+  // A scene: the first solid fits, the box (about 550 k particles, 66 MB) does not; no file of
+  // either is written. The budget leaves room for the process itself (about 25 MB).
+  Write("scene.toml",
+        "[water]\nspacing = 0.004\n\n"
+        "[[solid]]\nname = \"prop\"\nshape = \"mesh\"\nmesh = \"tetra.obj\"\nscale = 0.05\n\n"
+        "[[solid]]\nname = \"tank\"\nshape = \"box\"\ncontainer = true\nsize = [1.0, 0.5, 0.4]\n");
+  const Result scene = Run((dir_ / "scene.toml").string() + " -o " + (dir_ / "boundary").string() + " --memory-budget 48M");
+  EXPECT_EQ(scene.code, 10) << scene.err;
+  EXPECT_NE(scene.err.find("particles (solid tank, spacing 4 mm), budget 48 MiB"), std::string::npos) << scene.err;
+  EXPECT_EQ(std::count(scene.err.begin(), scene.err.end(), '\n'), 1) << scene.err;
+  EXPECT_FALSE(fs::exists(dir_ / "boundary"));
+  // The same scene under the default budget (the memory available).
+  const Result fits = Run((dir_ / "scene.toml").string() + " -o " + (dir_ / "boundary").string());
+  EXPECT_EQ(fits.code, 0) << fits.err;
+  EXPECT_TRUE(fs::exists(dir_ / "boundary" / "tank.h5part"));
+}
+
+TEST_F(RimeBoundaryTool, SandboxRefusesSceneMeshesOutsideIt) {
+  fs::create_directories(dir_ / "box");
+  fs::create_directories(dir_ / "outside");
+  fs::copy_file(dir_ / "tetra.obj", dir_ / "outside" / "tetra.obj");
+  fs::create_symlink(dir_ / "outside" / "tetra.obj", dir_ / "box" / "link.obj");
+  fs::copy_file(dir_ / "tetra.obj", dir_ / "box" / "tetra.obj");
+  const std::string box = (dir_ / "box").string();
+  const auto scene_with_mesh = [&](const std::string& mesh) {
+    std::ofstream(dir_ / "box" / "scene.toml") << "[water]\nspacing = 0.05\n\n[[solid]]\nname = \"prop\"\nshape = \"mesh\"\nmesh = \""
+                                                << mesh << "\"\n";
+  };
+  for (const std::string& mesh : {std::string("../outside/tetra.obj"), (dir_ / "outside" / "tetra.obj").string(), std::string("link.obj")}) {
+    SCOPED_TRACE(mesh);
+    scene_with_mesh(mesh);
+    const Result r = Run(box + "/scene.toml -o " + box + "/boundary --sandbox " + box);
+    EXPECT_EQ(r.code, 3) << r.err;
+    EXPECT_NE(r.err.find(box + "/scene.toml: solid 'prop' mesh "), std::string::npos) << r.err;
+    EXPECT_NE(r.err.find("resolves to " + (dir_ / "outside" / "tetra.obj").string() + ", outside the sandbox " + box),
+              std::string::npos)
+        << r.err;
+    EXPECT_FALSE(fs::exists(dir_ / "box" / "boundary"));
+  }
+  scene_with_mesh("tetra.obj");
+  const Result escape = Run(box + "/scene.toml -o " + box + "/../boundary --sandbox " + box);
+  EXPECT_EQ(escape.code, 2) << escape.err;
+  EXPECT_FALSE(fs::exists(dir_ / "boundary"));
+  const Result inside = Run(box + "/scene.toml -o " + box + "/boundary --sandbox " + box);
+  EXPECT_EQ(inside.code, 0) << inside.err;
+  EXPECT_TRUE(fs::exists(dir_ / "box" / "boundary" / "prop.h5part"));
+}
+
+}  // namespace

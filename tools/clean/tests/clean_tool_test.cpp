@@ -145,3 +145,54 @@ TEST_F(CleanTool, BadInputsExitThreeWithoutOutput) {
 
 }  // namespace
 }  // namespace rime
+
+namespace rime {
+namespace {
+
+TEST_F(CleanTool, RefusesAboveTheMemoryBudgetBeforeWritingAnyFrame) {
+  // Frame 0 is a small icosphere and would fit; frame 1 (about 8k triangles, OBJ and PLY) does not.
+  fs::create_directories(dir_ / "surface");
+  io::WriteMesh(dir_ / "surface" / "ice.0000.ply", meshfix::procedural::Icosphere(0.1, 2, {0, 0, 0}));
+  for (const char* ext : {"ply", "obj"}) {
+    fs::remove_all(dir_ / "surface" / "ice.0001.ply");
+    fs::remove_all(dir_ / "surface" / "ice.0001.obj");
+    io::WriteMesh(dir_ / "surface" / (std::string("ice.0001.") + ext), NoisyBallWithSpeck());
+    const ToolRun r = Clean((dir_ / "surface").string() + " -o " + (dir_ / "clean").string() + " -j 1 --memory-budget 1M", dir_);
+    EXPECT_EQ(r.code, 10) << ext << ": " << r.err;
+    const std::string expected = " triangles (mesh " + (dir_ / "surface" / (std::string("ice.0001.") + ext)).string() +
+                                 "), budget 1 MiB (--memory-budget)";
+    EXPECT_NE(r.err.find("rime-clean: error: needs about "), std::string::npos) << r.err;
+    EXPECT_NE(r.err.find(expected), std::string::npos) << r.err;
+    EXPECT_FALSE(fs::exists(dir_ / "clean")) << ext;
+  }
+  // Under the default budget (the memory available) both frames are cleaned.
+  const ToolRun fits = Clean((dir_ / "surface").string() + " -o " + (dir_ / "clean").string() + " -j 1", dir_);
+  EXPECT_EQ(fits.code, 0) << fits.err;
+  EXPECT_TRUE(fs::exists(dir_ / "clean" / "ice_clean.0001.ply"));
+  EXPECT_TRUE(fs::exists(dir_ / "clean" / "ice_clean.0000.ply"));
+}
+
+TEST_F(CleanTool, SandboxRefusesASymlinkOutAndAnEscapingOutput) {
+  fs::create_directories(dir_ / "box");
+  fs::create_directories(dir_ / "outside");
+  io::WriteMesh(dir_ / "outside" / "ice.0001.ply", meshfix::procedural::Icosphere(0.1, 2, {0, 0, 0}));
+  fs::create_symlink(dir_ / "outside" / "ice.0001.ply", dir_ / "box" / "ice.0001.ply");
+  const std::string box = (dir_ / "box").string();
+  const ToolRun link = Clean(box + "/ice.0001.ply -o " + box + "/clean --sandbox " + box, dir_);
+  EXPECT_EQ(link.code, 2) << link.err;
+  EXPECT_NE(link.err.find("input " + box + "/ice.0001.ply resolves to " + (dir_ / "outside" / "ice.0001.ply").string() +
+                          ", outside the sandbox"),
+            std::string::npos)
+      << link.err;
+  fs::remove(dir_ / "box" / "ice.0001.ply");
+  fs::copy_file(dir_ / "outside" / "ice.0001.ply", dir_ / "box" / "ice.0001.ply");
+  const ToolRun escape = Clean(box + "/ice.0001.ply -o " + (dir_ / "outside" / "clean").string() + " --sandbox " + box, dir_);
+  EXPECT_EQ(escape.code, 2) << escape.err;
+  EXPECT_FALSE(fs::exists(dir_ / "outside" / "clean"));
+  const ToolRun inside = Clean(box + "/ice.0001.ply -o " + box + "/clean --sandbox " + box, dir_);
+  EXPECT_EQ(inside.code, 0) << inside.err;
+  EXPECT_TRUE(fs::exists(dir_ / "box" / "clean" / "ice_clean.0001.ply"));
+}
+
+}  // namespace
+}  // namespace rime

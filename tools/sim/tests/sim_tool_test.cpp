@@ -164,3 +164,46 @@ TEST_F(SimTool, ParaViewOpensFramesAndTheSequence) {
 }
 
 }  // namespace
+
+namespace {
+
+TEST_F(SimTool, RefusesAboveTheMemoryBudgetBeforeWritingAFrame) {
+  fs::path scene = WriteScene("");
+  {
+    // The same scene at a 1 cm spacing: about 9.4 k water and 67 k boundary particles.
+    std::ifstream in(scene);
+    std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    text.replace(text.find("spacing = 0.04"), 14, "spacing = 0.01");
+    std::ofstream(scene) << text;
+  }
+  MakeBoundary(scene);
+  const Result r = Exec(Sim(scene, "sim", "--memory-budget 1M"));
+  EXPECT_EQ(r.code, 10) << r.output;
+  EXPECT_NE(r.output.find("rime-sim: error: needs about "), std::string::npos) << r.output;
+  // 0.25 x 0.25 x 0.15 m of water at 1 cm: 9,375 particles.
+  EXPECT_NE(r.output.find(" for 9.3"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find(" k water and "), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find(" boundary particles (scene " + scene.string() + ", spacing 10 mm), budget 1 MiB (--memory-budget)"),
+            std::string::npos)
+      << r.output;
+  EXPECT_FALSE(fs::exists(dir_ / "sim"));
+}
+
+TEST_F(SimTool, SandboxRefusesBoundaryAndOutputOutsideIt) {
+  const fs::path scene = WriteScene("");
+  MakeBoundary(scene);
+  fs::create_directories(dir_ / "box");
+  fs::copy_file(scene, dir_ / "box" / "scene.toml");
+  const std::string box = (dir_ / "box").string();
+  // The boundary files are outside the sandbox.
+  const Result boundary = Exec(Sim(dir_ / "box" / "scene.toml", "box/sim", "--sandbox " + box));
+  EXPECT_EQ(boundary.code, 2) << boundary.output;
+  EXPECT_NE(boundary.output.find("--boundary " + (dir_ / "boundary").string()), std::string::npos) << boundary.output;
+  EXPECT_NE(boundary.output.find("outside the sandbox"), std::string::npos) << boundary.output;
+  EXPECT_FALSE(fs::exists(dir_ / "box" / "sim"));
+  const Result output = Exec(Sim(dir_ / "box" / "scene.toml", "sim", "--sandbox " + box));
+  EXPECT_EQ(output.code, 2) << output.output;
+  EXPECT_FALSE(fs::exists(dir_ / "sim"));
+}
+
+}  // namespace

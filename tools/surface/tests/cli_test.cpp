@@ -3,6 +3,7 @@
 #include <unistd.h>
 #include <hdf5.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -142,12 +143,56 @@ TEST_F(Cli, MissingAnisotropyFallsBackOrFailsUnderStrict) {
   EXPECT_NE(lenient.output.find("isotropic"), std::string::npos) << lenient.output;
 }
 
-TEST_F(Cli, RefusesNewerFormatVersionAndMemoryBudget) {
+// A 24 x 24 x 24 block of ice: 13,824 particles, several MB to surface.
+rime::io::ParticleFrame MakeBlock(std::int64_t number) {
+  rime::io::ParticleFrame frame;
+  frame.spacing = 0.02;
+  frame.frame = number;
+  std::vector<rime::Vec3f> positions;
+  for (int i = 0; i < 24; ++i)
+    for (int j = 0; j < 24; ++j)
+      for (int k = 0; k < 24; ++k) positions.push_back(rime::Vec3f(i, j, k) * 0.02f);
+  frame.SetPositions(positions);
+  frame.Set("phase", std::vector<std::uint8_t>(positions.size(), 2));
+  for (int c = 0; c < 6; ++c) frame.Set("anisotropy_" + std::to_string(c), std::vector<float>(positions.size(), c < 3 ? 1.0f : 0.0f));
+  return frame;
+}
+
+TEST_F(Cli, RefusesAboveTheMemoryBudgetBeforeWritingAnyFrame) {
+  // Frame 0 is small and would fit; frame 1 is not: neither is written.
+  rime::io::WriteParticleFrame(Frame(0), MakeFrame(0, true));
+  rime::io::WriteParticleFrame(Frame(1), MakeBlock(1));
+  const RunResult refused = Execute(Sim() + " -o " + Out() + " -j 1 --phase ice --memory-budget 1M");
+  EXPECT_EQ(refused.code, 10) << refused.output;
+  EXPECT_NE(refused.output.find("rime-surface: error: needs about "), std::string::npos) << refused.output;
+  EXPECT_NE(refused.output.find(" voxels (frame " + Frame(1).string() + ", voxel 10 mm), budget 1 MiB (--memory-budget)"),
+            std::string::npos)
+      << refused.output;
+  EXPECT_EQ(std::count(refused.output.begin(), refused.output.end(), '\n'), 1) << refused.output;
+  EXPECT_FALSE(fs::exists(dir_ / "out"));
+  // The same frames under the default budget (the memory available) are surfaced.
+  const RunResult fits = Execute(Sim() + " -o " + Out() + " -j 1 --phase ice --format obj");
+  EXPECT_EQ(fits.code, 0) << fits.output;
+  EXPECT_EQ(OutputFiles(), 2u);
+}
+
+TEST_F(Cli, RefusesMalformedMemoryBudgetAndPathsOutsideTheSandbox) {
   rime::io::WriteParticleFrame(Frame(1), MakeFrame(1, true));
-  const RunResult budget = Execute(Frame(1).string() + " -o " + Out() + " --memory-budget 0.00001");
-  EXPECT_EQ(budget.code, 3) << budget.output;
-  EXPECT_NE(budget.output.find("estimated peak memory"), std::string::npos) << budget.output;
-  EXPECT_EQ(OutputFiles(), 0u);
+  const RunResult bad = Execute(Frame(1).string() + " -o " + Out() + " --memory-budget 4X");
+  EXPECT_EQ(bad.code, 2) << bad.output;
+  EXPECT_NE(bad.output.find("--memory-budget 4X"), std::string::npos) << bad.output;
+  // The sandbox is the frames' folder: an output beside it escapes through "..".
+  const RunResult escape = Execute(Frame(1).string() + " -o " + Sim() + "/../out --sandbox " + Sim());
+  EXPECT_EQ(escape.code, 2) << escape.output;
+  EXPECT_NE(escape.output.find("-o " + Sim() + "/../out resolves to " + Out() + ", outside the sandbox"), std::string::npos)
+      << escape.output;
+  EXPECT_FALSE(fs::exists(dir_ / "out"));
+  const RunResult inside = Execute(Frame(1).string() + " -o " + Sim() + "/out --format obj --sandbox " + Sim());
+  EXPECT_EQ(inside.code, 0) << inside.output;
+}
+
+TEST_F(Cli, RefusesNewerFormatVersion) {
+  rime::io::WriteParticleFrame(Frame(1), MakeFrame(1, true));
   // Pretend a newer Rime wrote the frame.
   const hid_t file = H5Fopen(Frame(1).c_str(), H5F_ACC_RDWR, H5P_DEFAULT);
   ASSERT_GE(file, 0);

@@ -10,6 +10,7 @@
 
 #include <cstdint>
 #include <filesystem>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -27,6 +28,9 @@ struct BoundarySettings {
   double rest_density = 1000;      // rho0, kg/m^3 (metadata only)
   std::uint64_t max_particles = 50'000'000;
   exec::Device device = exec::Device::Cpu();
+  /// Called once per object before sampling allocates, with the mesh's triangles and the particles
+  /// estimated from its area (a procedural shape: before it is tessellated); may throw to refuse.
+  std::function<void(double triangles, double particles, const std::string& where)> before_sampling;
 };
 
 struct BoundaryObject {

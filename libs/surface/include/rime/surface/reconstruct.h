@@ -111,7 +111,8 @@ double VoxelSize(const ParticleSet& particles, const Settings& settings);
 
 /// Peak memory estimate (bytes) of reconstructing these particles: computed from the sparse set
 /// of grid leaves the particles touch, without rasterizing.
-std::uint64_t EstimateMemoryBytes(const ParticleSet& particles, const Settings& settings);
+/// `voxels`, when given, receives the voxel count of those leaves (what the estimate grows with).
+std::uint64_t EstimateMemoryBytes(const ParticleSet& particles, const Settings& settings, std::uint64_t* voxels = nullptr);
 
 /// Throws rime::Error(kBadInput) for invalid settings or particles (non-finite positions...).
 Result Reconstruct(const ParticleSet& particles, const Settings& settings);

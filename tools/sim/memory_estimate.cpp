@@ -1,0 +1,39 @@
+#include "memory_estimate.h"
+
+#include <algorithm>
+#include <numbers>
+
+namespace rime {
+
+double ExpectedFluidParticles(const io::Scene& scene) {
+  const double d = scene.fluid.spacing;
+  const double cell = d * d * d;
+  double count = 0;
+  for (const io::FluidBlock& b : scene.fluid_blocks) {
+    const Vec3d e = b.max - b.min;
+    count += (b.shape == "box" ? e.x * e.y * e.z : 4.0 / 3.0 * std::numbers::pi * b.radius * b.radius * b.radius) / cell;
+  }
+  for (const io::Emitter& e : scene.emitters) {
+    const double area = e.shape == "disc" ? std::numbers::pi * e.radius * e.radius : e.width * e.height;
+    const double duration = std::max(0.0, std::min(e.stop, scene.info.end_time) - e.start);
+    count += area * e.speed * duration / cell;
+  }
+  return count;
+}
+
+double EstimateSimulationBytes(const SimulationCounts& c) {
+  const double t = c.scalar_bytes;
+  // Water: 36 scalars of state and scratch (positions, velocities, IISPH terms, colour, normals),
+  // ids, reorder slots and grid cells; freezing adds the anisotropy and phase-change scratch.
+  const double fluid = 36 * t + 48 + (c.freezing ? 12 * t + 24 : 0);
+  // Neighbour lists: an index, a kernel value and a gradient per pair.
+  const double pairs = (40 + 20) * (4 + 4 * t);
+  // Boundary: positions, velocities, rest-frame positions, volumes, ids; freezing adds film,
+  // growth direction, ice anisotropy and energies.
+  const double boundary = 11 * t + 29 + (c.freezing ? 16 * t + 24 : 0);
+  // The snapshot handed to the writer thread, and HDF5's chunk buffers for it.
+  const double snapshot = 2 * (16 * t + 16);
+  return c.fluid * (fluid + pairs + snapshot) + c.boundary * (boundary + (c.freezing ? snapshot : 0));
+}
+
+}  // namespace rime
