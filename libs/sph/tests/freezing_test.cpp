@@ -345,20 +345,14 @@ TEST(Freezing, ResumeWithNucleationDelayIsBitIdentical) {
 // ice grows along the splash, up into the stream, into a mound; with it the ice stays a coat.
 TEST(Freezing, GravityGrowthKeepsAPouredStreamFromPilingUpIce) {
   auto ice_height = [](double gravity_growth) {
-    io::Scene scene;
-    scene.fluid.spacing = kDp;
-    scene.modules = {"gravity", "viscosity", "freezing"};
-    scene.freezing.glaze_threshold = 0.02;
-    scene.freezing.icicle_threshold = 0.01;
+    io::Scene scene = DropScene(0.02, 0.01);
+    scene.fluid_blocks.clear();  // a stream instead of the block
     scene.freezing.gravity_growth = gravity_growth;
     io::Emitter e;
     e.center = {0.36, 0.36, 0.2};
     e.radius = 0.03;
     e.speed = 0.5;
     scene.emitters.push_back(e);
-    io::SolidObject box;
-    box.name = "box";
-    scene.solids.push_back(box);
     auto sim = Make(scene);
     const double end = 1.0;
     while (sim->time() < end - 1e-9) sim->Step(sim->NextTimeStep(end));

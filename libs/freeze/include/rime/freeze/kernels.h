@@ -224,13 +224,15 @@ template <class T>
 RIME_HDI T FreezingFraction(const Vec3<T>& growth, bool valid, const Vec3<T>& x_isf, const FreezeParams<T>& p, bool on_ice = false) {
   const T len = Norm(x_isf);
   Vec3<T> direction = growth;
+  bool has_direction = valid;
   if (on_ice && p.gravity_growth > T(0)) {
-    direction = valid && Norm(growth) > T(0) ? growth / Norm(growth) : Vec3<T>{};
+    const T flow = Norm(growth);
+    direction = valid && flow > T(0) ? growth / flow : Vec3<T>{};
     direction += p.gravity_dir * (-p.gravity_growth * p.growth_sign);
-    valid = true;
+    has_direction = true;  // gravity alone gives one where no flow was recorded
   }
   const T g = Norm(direction);
-  if (!valid || len < T(1e-6) * p.h || !(g > T(0))) return T(0.5);
+  if (!has_direction || len < T(1e-6) * p.h || !(g > T(0))) return T(0.5);
   const T dot = p.growth_sign * Dot(direction, x_isf) / (g * len);
   if (p.fr_clamp) return dot > T(0) ? dot : T(0);
   return (dot + T(1)) * T(0.5);
