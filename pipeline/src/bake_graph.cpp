@@ -98,7 +98,7 @@ std::vector<Job> BuildGraph(const SceneDocument& doc, const BakeLayout& layout, 
     job.program = RequireTool(options, job.tool_name);
     job.args = {scene_path, "-o", layout.boundary().string()};
     for (const auto& solid : scene.solids) {
-      if (solid.shape == "mesh") job.inputs.push_back(scene.Resolve(solid.mesh));
+      if (solid.shape == io::SolidShape::kMesh) job.inputs.push_back(scene.Resolve(solid.mesh));
       job.outputs.push_back(layout.boundary() / (solid.name + ".h5part"));
     }
     job.exclusive = true;
@@ -142,8 +142,8 @@ std::vector<Job> BuildGraph(const SceneDocument& doc, const BakeLayout& layout, 
   // scene's [surface] phase ("ice", "water", "both") and formats (obj, ply, vdb).
   const io::SurfaceSettings& surfacing = scene.surface;
   std::vector<std::string> phases;
-  if (surfacing.phase != "water") phases.push_back("ice");
-  if (surfacing.phase != "ice") phases.push_back("water");
+  if (surfacing.phase != io::SurfacePhases::kWater) phases.push_back("ice");
+  if (surfacing.phase != io::SurfacePhases::kIce) phases.push_back("water");
   const auto has_format = [&](const char* ext) {
     return std::find(surfacing.formats.begin(), surfacing.formats.end(), ext) != surfacing.formats.end();
   };

@@ -25,7 +25,7 @@ namespace {
 void RequireInSandbox(const Sandbox& sandbox, const io::Scene& scene, const BakeLayout& layout) {
   if (!sandbox.enabled()) return;
   for (const io::SolidObject& solid : scene.solids)
-    if (solid.shape == "mesh")
+    if (solid.shape == io::SolidShape::kMesh)
       sandbox.Require(scene.Resolve(solid.mesh), fmt::format("{}: solid '{}' mesh", scene.file.string(), solid.name),
                       ExitCode::kBadInput);
   for (const fs::path& folder : {layout.output, layout.cache(), layout.state_folder(), layout.logs(), layout.boundary(),

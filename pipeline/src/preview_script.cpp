@@ -145,17 +145,17 @@ json SceneBounds(const io::Scene& scene) {
     for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], c[a] - half[a]), hi[a] = std::max(hi[a], c[a] + half[a]);
   };
   for (const auto& b : scene.fluid_blocks) {
-    if (b.shape == "box") grow((b.min + b.max) * 0.5, (b.max - b.min) * 0.5);
+    if (b.shape == io::BlockShape::kBox) grow((b.min + b.max) * 0.5, (b.max - b.min) * 0.5);
     else grow(b.center, {b.radius, b.radius, b.radius});
   }
   for (const auto& e : scene.emitters) grow(e.center, {0.1, 0.1, 0.1});
   for (const auto& s : scene.solids) {
     const double k = std::max({s.transform.scale.x, s.transform.scale.y, s.transform.scale.z});
     double r = 0;
-    if (s.shape == "sphere") r = s.radius;
-    else if (s.shape == "torus") r = s.radius + s.minor_radius;
-    else if (s.shape == "cylinder") r = std::max(s.radius, s.height / 2);
-    else if (s.shape == "box") r = Norm(s.size) / 2;
+    if (s.shape == io::SolidShape::kSphere) r = s.radius;
+    else if (s.shape == io::SolidShape::kTorus) r = s.radius + s.minor_radius;
+    else if (s.shape == io::SolidShape::kCylinder) r = std::max(s.radius, s.height / 2);
+    else if (s.shape == io::SolidShape::kBox) r = Norm(s.size) / 2;
     else continue;  // planes are unbounded ground; meshes are framed by the water around them
     grow(s.transform.translate, {k * r, k * r, k * r});
   }
@@ -178,8 +178,8 @@ void WritePreviewFiles(const SceneDocument& doc, const BakeLayout& layout) {
   json solids = json::array();
   for (const auto& s : scene.solids) {
     solids.push_back({{"name", s.name},
-                      {"shape", s.shape},
-                      {"mesh", s.shape == "mesh" ? fs::absolute(scene.Resolve(s.mesh)).string() : ""},
+                      {"shape", std::string(io::EnumName(s.shape))},
+                      {"mesh", s.shape == io::SolidShape::kMesh ? fs::absolute(scene.Resolve(s.mesh)).string() : ""},
                       {"size", ToArray(s.size)},
                       {"radius", s.radius},
                       {"minor_radius", s.minor_radius},
@@ -188,11 +188,11 @@ void WritePreviewFiles(const SceneDocument& doc, const BakeLayout& layout) {
                        {{"translate", ToArray(s.transform.translate)},
                         {"rotate_deg", ToArray(s.transform.rotate_deg)},
                         {"scale", ToArray(s.transform.scale)},
-                        {"up_axis", s.transform.up_axis}}}});
+                        {"up_axis", std::string(io::EnumName(s.transform.up_axis))}}}});
   }
   const BakeSettings& b = doc.bake();
   const json setup = {{"solids", solids},         {"bounds", SceneBounds(scene)}, {"width", b.preview_width},
-                      {"height", b.preview_height}, {"engine", b.preview_engine}, {"samples", b.preview_samples}};
+                      {"height", b.preview_height}, {"engine", std::string(io::EnumName(b.preview_engine))}, {"samples", b.preview_samples}};
   const fs::path folder = layout.cache() / "preview";
   fs::create_directories(folder);
   WriteIfChanged(folder / "render_preview.py", std::string(kRenderScript).substr(1));

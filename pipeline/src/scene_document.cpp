@@ -15,11 +15,7 @@ namespace {
 
 BakeSettings ParseBakeTable(io::TomlReader t) {
   BakeSettings b;
-  b.preview_width = static_cast<int>(t.Integer("preview_width", b.preview_width, io::Range::Closed(16, 16384)));
-  b.preview_height = static_cast<int>(t.Integer("preview_height", b.preview_height, io::Range::Closed(16, 16384)));
-  b.preview_engine = t.String("preview_engine", b.preview_engine, {"workbench", "cycles"});
-  b.preview_samples = static_cast<int>(t.Integer("preview_samples", b.preview_samples, io::Range::Closed(1, 65536)));
-  b.contact_sheet_columns = static_cast<int>(t.Integer("contact_sheet_columns", b.contact_sheet_columns, io::Range::Closed(1, 64)));
+  io::LoadSettings(t, b);
   t.RejectUnknownKeys();
   return b;
 }

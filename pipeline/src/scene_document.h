@@ -9,17 +9,11 @@
 #include <vector>
 
 #include "rime/io/scene.h"
+#include "rime/io/scene_bake.h"
 
 namespace rime::bake {
 
-/// `[bake]` table of the scene file (README.md "rime-bake"). Only the optional preview stage reads it.
-struct BakeSettings {
-  int preview_width = 960;             // pixels
-  int preview_height = 540;            // pixels
-  std::string preview_engine = "workbench";  // "workbench" | "cycles"
-  int preview_samples = 16;            // Cycles samples per pixel (Workbench ignores it)
-  int contact_sheet_columns = 4;       // frames per row of the contact sheet
-};
+using io::BakeSettings;
 
 class SceneDocument {
  public:

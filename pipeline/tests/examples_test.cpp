@@ -38,12 +38,12 @@ TEST(Examples, EverySceneLoads) {
 
 TEST(Examples, DefaultSceneIsProceduralAndFreezes) {
   const io::Scene scene = io::LoadScene(RIME_SOURCE_DIR "/examples/default.toml");
-  for (const auto& solid : scene.solids) EXPECT_NE(solid.shape, "mesh") << solid.name;
+  for (const auto& solid : scene.solids) EXPECT_NE(solid.shape, io::SolidShape::kMesh) << solid.name;
   for (const char* module : {"gravity", "viscosity", "surface_tension", "freezing"}) EXPECT_TRUE(scene.Enabled(module)) << module;
   // Small enough to bake in minutes on 2 cores: a few thousand particles.
   double water_volume = 0;
   for (const auto& b : scene.fluid_blocks)
-    water_volume += b.shape == "box" ? (b.max.x - b.min.x) * (b.max.y - b.min.y) * (b.max.z - b.min.z) : 4.18879 * b.radius * b.radius * b.radius;
+    water_volume += b.shape == io::BlockShape::kBox ? (b.max.x - b.min.x) * (b.max.y - b.min.y) * (b.max.z - b.min.z) : 4.18879 * b.radius * b.radius * b.radius;
   const double particles = water_volume / (scene.fluid.spacing * scene.fluid.spacing * scene.fluid.spacing);
   EXPECT_GT(particles, 500);
   EXPECT_LT(particles, 20000);
@@ -57,7 +57,7 @@ TEST(Examples, DamBreakStartsClearOfTheWalls) {
   ASSERT_EQ(scene.solids.size(), 1u);
   const auto& tank = scene.solids[0];
   EXPECT_TRUE(tank.container);
-  EXPECT_EQ(tank.shape, "box");
+  EXPECT_EQ(tank.shape, io::SolidShape::kBox);
   const double d = scene.fluid.spacing;
   EXPECT_DOUBLE_EQ(d, 0.0264);
   const Vec3d tank_min = tank.transform.translate - tank.size * 0.5;
@@ -77,7 +77,7 @@ TEST(Examples, MeshScenesPointAtTheSharedMeshes) {
   for (const auto& file : ExampleScenes()) {
     const io::Scene scene = io::LoadScene(file);
     for (const auto& solid : scene.solids)
-      if (solid.shape == "mesh") EXPECT_TRUE(fs::exists(scene.Resolve(solid.mesh))) << file << ": " << solid.mesh;
+      if (solid.shape == io::SolidShape::kMesh) EXPECT_TRUE(fs::exists(scene.Resolve(solid.mesh))) << file << ": " << solid.mesh;
   }
 }
 

@@ -180,7 +180,7 @@ INSTANTIATE_TEST_SUITE_P(Speeds, ExtremesPlateImpact, ::testing::Values(10.0, 30
 
 io::Scene FixedStepPlateScene(double speed, double lambda) {
   io::Scene scene = PlateScene(speed);
-  scene.solver.time_step = "fixed";
+  scene.solver.time_step = rime::io::TimeStep::kFixed;
   scene.solver.dt = lambda * kPlateDp / speed;
   return scene;
 }
@@ -531,7 +531,7 @@ TEST(ExtremesFreezing, EverythingFreezesWithConsistentCountsAndNoNaN) {
   // Growth against the flow, mapped: every wetted neighbour then has some energy. With the default
   // (with the flow, clamped) water the flow points away from keeps zero energy and stays liquid.
   scene.freezing.growth_sign = 1;
-  scene.freezing.fr_mode = "map";
+  scene.freezing.fr_mode = rime::io::FrMode::kMap;
   sph::Simulation<float> sim(scene, exec::Device::Cpu());
   sim.AddBoundaryObject(sph::test::BoxBoundary(dp, 0.72, 0.72, 0.2), "box");
   sim.Initialize();

@@ -86,7 +86,7 @@ void MeshImport(std::string_view bytes) {
   const fs::path path = WriteInput(bytes, "mesh" + extension);
   io::SolidObject solid;
   solid.name = "fuzz";
-  solid.shape = "mesh";
+  solid.shape = rime::io::SolidShape::kMesh;
   solid.mesh = path;
   boundary::BoundarySettings settings;
   settings.particle_spacing = 0.1;  // d_b = 0.05 m: a unit cube gets about 2400 particles

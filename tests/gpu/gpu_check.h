@@ -19,7 +19,7 @@ inline io::Scene DamBreak(int n, bool freezing) {
   io::Scene scene;
   scene.fluid.spacing = dp;
   scene.modules = freezing ? std::set<std::string>{"gravity", "viscosity", "surface_tension", "freezing"} : std::set<std::string>{"gravity"};
-  scene.solver.time_step = "fixed";
+  scene.solver.time_step = rime::io::TimeStep::kFixed;
   scene.solver.dt = 0.001;
   scene.freezing.glaze_threshold = 0.05;
   scene.freezing.icicle_threshold = 0.01;

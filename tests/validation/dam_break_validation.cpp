@@ -78,8 +78,8 @@ int Run(const Options& o) {
   const double t_scale = std::sqrt(2 * kG / kA);  // T = t sqrt(2g/a) (n² = 2)
 
   io::Scene scene = sph::test::ColumnScene(dp, per_a, ny, 2 * per_a, 0);
-  scene.fluid.precision = "float";
-  scene.solver.time_step = "cfl";  // spec §7 defaults: CFL 0.4, Δt ≤ 6 ms
+  scene.fluid.precision = rime::io::Precision::kFloat;
+  scene.solver.time_step = rime::io::TimeStep::kCfl;  // spec §7 defaults: CFL 0.4, Δt ≤ 6 ms
   // Inviscid by default: the spec's sticky viscosity (β0 β1 = 1 m/s, ν_eff ≈ 0.1 h m²/s) is an
   // artistic setting ~100x the viscosity of water at these spacings; --viscosity shows its effect.
   scene.modules = {"gravity"};

@@ -133,11 +133,11 @@ Result Oscillate(double radius_in_dp, double epsilon, const Config& cfg, bool tr
   scene.viscosity.mu = cfg.mu;
   if (cfg.ExtraMu()) scene.modules.insert("viscosity");
   scene.solver.dt_max = cfg.dt_max;
-  scene.surface_tension.model = cfg.model;
+  rime::io::ParseEnum(cfg.model, scene.surface_tension.model);
   scene.surface_tension.gamma = cfg.gamma;
   scene.surface_tension.kappa = cfg.kappa;
   io::FluidBlock drop;
-  drop.shape = "sphere";
+  drop.shape = rime::io::BlockShape::kSphere;
   drop.center = {0, 0, 0};
   drop.radius = radius_in_dp * kDp;
   scene.fluid_blocks.push_back(drop);

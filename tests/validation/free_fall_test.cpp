@@ -34,7 +34,7 @@ std::unique_ptr<sph::Simulation<double>> Make(const io::Scene& scene) {
 // error is g Δt t / 2 for constant Δt, so halving Δt must halve the error.
 double FreeFallError(double dt) {
   io::Scene scene = Empty();
-  scene.solver.time_step = "fixed";
+  scene.solver.time_step = rime::io::TimeStep::kFixed;
   scene.solver.dt = dt;
   io::FluidBlock b;
   b.min = {0.15, 0.15, 0.8};
@@ -72,11 +72,11 @@ TEST(Extremes, EmptySceneRunsAndReportsNoWater) {
 TEST(Extremes, SingleParticleFallsFreelyWithoutNaN) {
   io::Scene scene = Empty();
   io::FluidBlock b;
-  b.shape = "sphere";
+  b.shape = rime::io::BlockShape::kSphere;
   b.center = {0.25, 0.25, 0.6};
   b.radius = 0.001;  // one lattice point
   scene.fluid_blocks.push_back(b);
-  scene.solver.time_step = "fixed";
+  scene.solver.time_step = rime::io::TimeStep::kFixed;
   scene.solver.dt = 0.002;
   auto sim = Make(scene);
   ASSERT_EQ(sim->fluid_count(), 1);

@@ -34,7 +34,7 @@ int Run(const Options& o) {
   // Spec T13's setting: fixed Δt = 2 ms (from ColumnScene), default viscosities; `--cfl` runs the
   // spec §7 default adaptive step instead (CFL 0.4 with the head speed √(2 g H), Δt ≤ 6 ms).
   scene.modules = {"gravity", "viscosity"};
-  if (o.cfl) scene.solver.time_step = "cfl";
+  if (o.cfl) scene.solver.time_step = rime::io::TimeStep::kCfl;
   sph::Simulation<double> sim(scene, exec::Device::Cpu());
   sim.AddBoundaryObject(sph::test::BoxBoundary(dp, width, width, kHeight + 0.1), "box");
   sim.Initialize();

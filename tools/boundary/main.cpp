@@ -14,6 +14,7 @@
 #include "rime/core/progress.h"
 #include "rime/exec/device.h"
 #include "rime/io/scene.h"
+#include "override_flags.h"
 #include "tool.h"
 
 namespace {
@@ -23,7 +24,8 @@ using namespace rime;
 
 struct Options {
   std::string input, output;
-  std::optional<double> spacing, spacing_ratio, smoothing_ratio;
+  tool::OverrideFlags<io::SolidObject> solid;  // --spacing-ratio
+  tool::OverrideFlags<io::FluidSettings> water;  // --spacing, --smoothing-ratio
   std::vector<double> scale, rotate, translate;
   std::string up_axis, name;
   std::uint32_t object_id = 0;
@@ -103,16 +105,18 @@ int Run(const Options& opt, const tool::CommonOptions& common) {
                                     "a scene file sets them per [[solid]]");
     const io::Scene scene = io::LoadScene(input);
     scene_hash = scene.hash;
-    settings.particle_spacing = opt.spacing.value_or(scene.fluid.spacing);
-    settings.smoothing_ratio = opt.smoothing_ratio.value_or(scene.fluid.smoothing_ratio);
+    io::FluidSettings water = scene.fluid;
+    opt.water.ApplyTo(water);
+    settings.particle_spacing = water.spacing;
+    settings.smoothing_ratio = water.smoothing_ratio;
     settings.rest_density = scene.fluid.rest_density;
     if (scene.solids.empty()) log::Warn("{} has no [[solid]]: nothing to sample", input.string());
     Progress progress("solids", Index(scene.solids.size()));
     for (std::size_t k = 0; k < scene.solids.size(); ++k) {
       io::SolidObject solid = scene.solids[k];
-      if (opt.spacing_ratio) solid.spacing_ratio = *opt.spacing_ratio;
-      const fs::path mesh_path = solid.shape == "mesh" ? scene.Resolve(solid.mesh) : fs::path();
-      if (solid.shape == "mesh")
+      opt.solid.ApplyTo(solid);
+      const fs::path mesh_path = solid.shape == io::SolidShape::kMesh ? scene.Resolve(solid.mesh) : fs::path();
+      if (solid.shape == io::SolidShape::kMesh)
         sandbox.Require(mesh_path, fmt::format("{}: solid '{}' mesh", input.string(), solid.name), ExitCode::kBadInput);
       sandbox.Require(output / (solid.name + ".h5part"), "-o", ExitCode::kUsage);
       objects.emplace_back(boundary::BuildBoundaryObject(solid, std::uint32_t(k), mesh_path, settings), output / (solid.name + ".h5part"));
@@ -122,18 +126,20 @@ int Run(const Options& opt, const tool::CommonOptions& common) {
     progress.Finish();
   } else {
     io::SolidObject solid;
-    solid.shape = "mesh";
+    solid.shape = io::SolidShape::kMesh;
     solid.mesh = input;
     solid.name = opt.name.empty() ? input.stem().string() : opt.name;
     solid.merge_meshes = !opt.separate_parts;
-    solid.spacing_ratio = opt.spacing_ratio.value_or(0.5);
+    opt.solid.ApplyTo(solid);
     if (opt.scale.size() == 1) solid.transform.scale = Vec3d::Splat(opt.scale[0]);
     else if (!opt.scale.empty()) solid.transform.scale = ThreeValues(opt.scale, "--scale");
     if (!opt.rotate.empty()) solid.transform.rotate_deg = ThreeValues(opt.rotate, "--rotate");
     if (!opt.translate.empty()) solid.transform.translate = ThreeValues(opt.translate, "--translate");
-    if (!opt.up_axis.empty()) solid.transform.up_axis = opt.up_axis;
-    settings.particle_spacing = opt.spacing.value_or(0.02);
-    settings.smoothing_ratio = opt.smoothing_ratio.value_or(1.0);
+    if (!opt.up_axis.empty()) io::ParseEnum(opt.up_axis, solid.transform.up_axis);
+    io::FluidSettings water;
+    opt.water.ApplyTo(water);
+    settings.particle_spacing = water.spacing;
+    settings.smoothing_ratio = water.smoothing_ratio;
     if (output.extension() != ".h5part")
       throw Error(ExitCode::kUsage, "the output of a single mesh is a .h5part file", output.string());
     objects.emplace_back(boundary::BuildBoundaryObject(solid, opt.object_id, input, settings), output);
@@ -175,13 +181,9 @@ int main(int argc, char** argv) {
   tool::Setup(app, "rime-boundary", common, tool::kThreads | tool::kDevice | tool::kJsonSummary | tool::kMemoryBudget | tool::kSandbox);
   app.add_option("input", opt.input, "A mesh file, or a scene file (.toml)")->required();
   app.add_option("-o,--output", opt.output, "Output .h5part file (mesh) or folder (scene)")->required();
-  app.add_option("--spacing", opt.spacing,
-                 "Fluid particle spacing d_p, m (default: the scene's [water] spacing, or 0.02 for a mesh); written as the "
-                 "file's `spacing`, particle radius = d_p/2");
-  app.add_option("--spacing-ratio", opt.spacing_ratio,
-                 "Boundary spacing d_b / d_p (default: the solid's spacing_ratio, or 0.5 for a mesh; spec §3)");
-  app.add_option("--smoothing-ratio", opt.smoothing_ratio,
-                 "Smoothing length h / d_p used for the volumes (default: the scene's [water] smoothing_ratio, or 1)");
+  // The scene's [water] values, or the built-in ones for a mesh; BuildBoundaryObject refuses bad values naming the input.
+  opt.water.AddTo(app, /*check_ranges=*/false);
+  opt.solid.AddTo(app, /*check_ranges=*/false);
   app.add_option("--scale", opt.scale, "Mesh only: uniform scale s, or sx,sy,sz (applied after --up-axis)")->expected(1, 3)->delimiter(',');
   app.add_option("--rotate", opt.rotate, "Mesh only: Euler angles x,y,z in degrees, applied X then Y then Z after the scale")
       ->expected(3)

@@ -25,6 +25,7 @@
 #include "rime/io/particles.h"
 #include "rime/io/scene.h"
 #include "rime/meshfix/clean.h"
+#include "override_flags.h"
 #include "tool.h"
 
 namespace fs = std::filesystem;
@@ -61,48 +62,6 @@ Frame ParseName(const fs::path& input) {
   }
   return f;
 }
-
-/// Overrides: options given on the command line replace the scene's (or default) values.
-struct Overrides {
-  std::optional<std::string> repair, smooth, self_intersections, decimate_method;
-  std::optional<bool> remesh;
-  std::optional<int> min_component_faces, max_hole_edges, remesh_iterations, smooth_iterations, shape_smooth_iterations;
-  std::optional<double> cap_angle, needle_ratio, min_component_area, min_component_volume, target_edge, target_edge_factor,
-      shape_smooth_time, decimate_ratio, decimate_max_error;
-  std::optional<long long> decimate_faces;
-  bool no_degenerate = false, almost_degenerate = false, no_components = false, no_fill_holes = false, no_fair = false,
-       no_decimate = false, no_velocity = false;
-
-  void ApplyTo(io::CleanupSettings& s) const {
-    if (repair) s.repair = *repair;
-    if (no_degenerate) s.remove_degenerate = false;
-    if (almost_degenerate) s.remove_almost_degenerate = true;
-    if (cap_angle) s.cap_angle_deg = *cap_angle;
-    if (needle_ratio) s.needle_ratio = *needle_ratio;
-    if (no_components) s.remove_components = false;
-    if (min_component_faces) s.min_component_faces = *min_component_faces;
-    if (min_component_area) s.min_component_area = *min_component_area;
-    if (min_component_volume) s.min_component_volume = *min_component_volume;
-    if (no_fill_holes) s.fill_holes = false;
-    if (max_hole_edges) s.max_hole_edges = *max_hole_edges;
-    if (no_fair) s.fair_holes = false;
-    if (remesh) s.remesh = *remesh;
-    if (target_edge) s.target_edge = *target_edge, s.remesh = remesh.value_or(true);
-    if (target_edge_factor) s.target_edge_factor = *target_edge_factor;
-    if (remesh_iterations) s.remesh_iterations = *remesh_iterations;
-    if (smooth) s.smooth = *smooth;
-    if (smooth_iterations) s.smooth_iterations = *smooth_iterations;
-    if (shape_smooth_iterations) s.shape_smooth_iterations = *shape_smooth_iterations;
-    if (shape_smooth_time) s.shape_smooth_time = *shape_smooth_time;
-    if (no_decimate) s.decimate = false;
-    if (decimate_ratio) s.decimate_ratio = *decimate_ratio;
-    if (decimate_faces) s.decimate_faces = *decimate_faces;
-    if (decimate_max_error) s.decimate_max_error = *decimate_max_error;
-    if (decimate_method) s.decimate_method = *decimate_method;
-    if (self_intersections) s.self_intersections = *self_intersections;
-    if (no_velocity) s.transfer_velocity = false;
-  }
-};
 
 /// Triangles a mesh file holds, counted without reading it into memory: a PLY's `element face`
 /// count, an OBJ's `f` lines (a polygon of k corners counts k - 2). An unreadable file counts 0 and
@@ -155,8 +114,6 @@ int main(int argc, char** argv) {
 
   std::vector<std::string> inputs;
   std::string output, format, scene_file, report_file;
-  Overrides o;
-  const io::CleanupSettings d;  // defaults, for the help text
   app.add_option("MESH", inputs, "Input meshes (.obj/.ply), or folders of them; frame numbers are read from names like ice.0012.obj")
       ->required();
   app.add_option("-o,--output", output,
@@ -170,53 +127,8 @@ int main(int argc, char** argv) {
   app.add_option("--report", report_file, "Write every frame's quality report to this JSON file");
 
   auto* g = app.add_option_group("Operations (in this order)");
-  g->add_option("--repair", o.repair, "1. Soup repair: auto (only when the faces are not a manifold mesh), always, never [" + d.repair + "]")
-      ->check(CLI::IsMember({"auto", "always", "never"}));
-  g->add_flag("--no-degenerate", o.no_degenerate, "2. Keep zero-area faces");
-  g->add_flag("--almost-degenerate", o.almost_degenerate, "2. Also remove caps and needles (CGAL experimental, slow)");
-  g->add_option("--cap-angle", o.cap_angle, fmt::format("2. Cap: a triangle angle above this, degrees [{}]", d.cap_angle_deg));
-  g->add_option("--needle-ratio", o.needle_ratio, fmt::format("2. Needle: longest/shortest edge above this [{}]", d.needle_ratio));
-  g->add_flag("--no-components", o.no_components, "3. Keep all connected components");
-  g->add_option("--min-component-faces", o.min_component_faces,
-                fmt::format("3. Remove components with fewer faces (the largest always stays) [{}]", d.min_component_faces))
-      ->check(CLI::NonNegativeNumber);
-  g->add_option("--min-component-area", o.min_component_area, "3. ... or a smaller area, m^2 (0 = off) [0]")->check(CLI::NonNegativeNumber);
-  g->add_option("--min-component-volume", o.min_component_volume, "3. ... or a smaller volume (closed ones), m^3 (0 = off) [0]")
-      ->check(CLI::NonNegativeNumber);
-  g->add_flag("--no-fill-holes", o.no_fill_holes, "4. Leave holes open");
-  g->add_option("--max-hole-edges", o.max_hole_edges, fmt::format("4. Fill holes with at most this many border edges [{}]", d.max_hole_edges))
-      ->check(CLI::Range(3, 1000000000));
-  g->add_flag("--no-fair", o.no_fair, "4. Triangulate and refine holes without fairing");
-  g->add_flag("--remesh,!--no-remesh", o.remesh, "5. Isotropic remeshing (off by default: slow, see README)");
-  g->add_option("--target-edge", o.target_edge, "5. Remeshing edge length, m (implies --remesh; default: factor x mean input edge)")
-      ->check(CLI::PositiveNumber);
-  g->add_option("--target-edge-factor", o.target_edge_factor, fmt::format("5. Target edge / mean input edge [{}]", d.target_edge_factor))
-      ->check(CLI::PositiveNumber);
-  g->add_option("--remesh-iterations", o.remesh_iterations, fmt::format("5. Remeshing iterations [{}]", d.remesh_iterations))
-      ->check(CLI::Range(1, 100));
-  g->add_flag("--no-decimate", o.no_decimate, "6. Keep the face count");
-  g->add_option("--decimate-ratio", o.decimate_ratio, fmt::format("6. Keep this fraction of the faces [{}]", d.decimate_ratio))
-      ->check(CLI::Range(1e-6, 1.0));
-  g->add_option("--decimate-faces", o.decimate_faces, "6. Target face count (overrides the ratio)")->check(CLI::PositiveNumber);
-  g->add_option("--decimate-max-error", o.decimate_max_error,
-                "6. Also stop when a collapse would cost more than this quadric error, m (0 = off) [0]")
-      ->check(CLI::NonNegativeNumber);
-  g->add_option("--decimate-method", o.decimate_method,
-                "6. batch (rime's quadric collapse in sorted passes, fast) or cgal (CGAL edge_collapse) [" + d.decimate_method + "]")
-      ->check(CLI::IsMember({"batch", "cgal"}));
-  g->add_option("--smooth", o.smooth, "7. tangential (relaxation, keeps volume), angle, none [" + d.smooth + "]")
-      ->check(CLI::IsMember({"tangential", "angle", "none"}));
-  g->add_option("--smooth-iterations", o.smooth_iterations, fmt::format("7. Smoothing iterations [{}]", d.smooth_iterations))
-      ->check(CLI::Range(0, 1000));
-  g->add_option("--shape-smooth-iterations", o.shape_smooth_iterations,
-                "7. Mean-curvature-flow iterations, volume restored afterwards (0 = off) [0]")
-      ->check(CLI::Range(0, 1000));
-  g->add_option("--shape-smooth-time", o.shape_smooth_time, fmt::format("7. Mean-curvature-flow time step, m^2 (larger smooths more) [{}]", d.shape_smooth_time))
-      ->check(CLI::PositiveNumber);
-  g->add_option("--self-intersections", o.self_intersections,
-                "8. report (count pairs), remove (CGAL experimental), off [" + d.self_intersections + "]")
-      ->check(CLI::IsMember({"report", "remove", "off"}));
-  g->add_flag("--no-velocity", o.no_velocity, "Drop per-vertex velocities instead of transferring them");
+  tool::OverrideFlags<io::CleanupSettings> overrides;
+  overrides.AddTo(*g);
 
   return tool::Main(app, argc, argv, common, [&]() -> int {
     const auto start = std::chrono::steady_clock::now();
@@ -228,7 +140,8 @@ int main(int argc, char** argv) {
     const MemoryBudget budget = tool::Budget(common);
     io::CleanupSettings settings;
     if (!scene_file.empty()) settings = io::LoadScene(scene_file).cleanup;
-    o.ApplyTo(settings);
+    overrides.ApplyTo(settings);
+    if (overrides.Given("target_edge") && !overrides.Given("remesh")) settings.remesh = true;
     const tool::FrameRange range = tool::ParseFrames(common.frames);
 
     // Inputs: files and folders of .obj/.ply, frames sorted by number, filtered by --frames.

@@ -90,7 +90,7 @@ int main(int argc, char** argv) {
       throw InputError("no particle frames: bake the scene first (rime-bake " + scene_file + ")", sim.string());
     std::set<std::uint32_t> objects;  // glaze is measured on the objects, not on the ground
     for (std::uint32_t i = 0; i < scene.solids.size(); ++i)
-      if (scene.solids[i].shape != "plane") objects.insert(i);
+      if (scene.solids[i].shape != io::SolidShape::kPlane) objects.insert(i);
     const tool::FrameRange range = tool::ParseFrames(common.frames);
     std::vector<std::int64_t> frames;
     static const std::regex name(R"(^particles\.(\d+)\.h5part$)");

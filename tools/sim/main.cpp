@@ -18,6 +18,7 @@
 #include "rime/io/scene.h"
 #include "rime/sph/simulation.h"
 #include "memory_estimate.h"
+#include "override_flags.h"
 #include "tool.h"
 
 namespace fs = std::filesystem;
@@ -33,7 +34,6 @@ struct Options {
   std::string boundary_dir;
   std::string output;
   bool resume = false;
-  double end_time = 0;  // 0: the scene's
 };
 
 // The last frame file in `folder` that reads back completely (writes are atomic, but a file may
@@ -119,7 +119,7 @@ int Run(const rime::io::Scene& scene, const Options& opt, const rime::tool::Comm
   const fs::path out(opt.output);
   fs::create_directories(out);
   const double fps = scene.info.fps;
-  const double end_time = opt.end_time > 0 ? opt.end_time : scene.info.end_time;
+  const double end_time = scene.info.end_time;
   const std::int64_t last_frame = static_cast<std::int64_t>(std::floor(end_time * fps + 1e-9));
 
   std::vector<std::string> stats_lines;
@@ -269,7 +269,8 @@ int main(int argc, char** argv) {
   app.add_option("-o,--output", opt.output, "Output folder for the frames")->required();
   app.add_option("--boundary", opt.boundary_dir, "Folder with the boundary files written by rime-boundary (default: OUTPUT/../boundary)");
   app.add_flag("--resume", opt.resume, "Continue from the last complete frame in the output folder");
-  app.add_option("--end-time", opt.end_time, "Override the scene's end time, s")->check(CLI::PositiveNumber);
+  rime::tool::OverrideFlags<rime::io::SceneInfo> scene_overrides;  // --end-time
+  scene_overrides.AddTo(app);
   std::signal(SIGINT, OnInterrupt);
   std::signal(SIGTERM, OnInterrupt);
   return rime::tool::Main(app, argc, argv, common, [&] {
@@ -278,8 +279,9 @@ int main(int argc, char** argv) {
     sandbox.Require(opt.output, "-o", rime::ExitCode::kUsage);
     if (!opt.boundary_dir.empty()) sandbox.Require(opt.boundary_dir, "--boundary", rime::ExitCode::kUsage);
     const rime::MemoryBudget budget = rime::tool::Budget(common);
-    const rime::io::Scene scene = rime::io::LoadScene(opt.scene);
-    return scene.fluid.precision == "double" ? Run<double>(scene, opt, common, sandbox, budget)
+    rime::io::Scene scene = rime::io::LoadScene(opt.scene);
+    scene_overrides.ApplyTo(scene.info);
+    return scene.fluid.precision == rime::io::Precision::kDouble ? Run<double>(scene, opt, common, sandbox, budget)
                                              : Run<float>(scene, opt, common, sandbox, budget);
   });
 }

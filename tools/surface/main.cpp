@@ -22,6 +22,7 @@
 #include "rime/io/scene.h"
 #include "rime/surface/frame_input.h"
 #include "rime/surface/reconstruct.h"
+#include "override_flags.h"
 #include "tool.h"
 
 namespace fs = std::filesystem;
@@ -33,13 +34,8 @@ struct Options {
   std::vector<std::string> inputs;
   std::string output;
   std::string scene;
-  std::string phase;
   std::string field;
-  double voxel_size = -1, r_iso = -1, lambda = -1, k_r = -1, k_s = -1, k_n = -1, iso = -1;
-  int resolution = -1, n_eps = -1, smooth = -1;
-  double close = -1;
-  bool velocity = false, density = false, strict = false, keep_voids = false;
-  std::string formats;
+  bool strict = false, keep_voids = false;
 };
 
 struct FrameFile {
@@ -171,31 +167,10 @@ int main(int argc, char** argv) {
       ->required();
   app.add_option("-o,--output", o.output, "Output folder (created); writes ice.NNNN.{vdb,obj,ply} and water.NNNN.*")->required();
   app.add_option("--scene", o.scene, "Scene file whose [surface] section gives the defaults (flags override it)");
-  app.add_option("--phase", o.phase, "Which particles to surface: ice, water or both (default both)")
-      ->check(CLI::IsMember({"ice", "water", "both"}));
-  app.add_option("--field", o.field,
-                 "Field for every phase: ellipsoids (union of anisotropic ellipsoids, Eq. 41; ice default), kernel_sum "
-                 "(Yu & Turk sum of anisotropic kernels at --iso; water default) or isotropic (spheres of radius r_iso)")
-      ->check(CLI::IsMember({"ellipsoids", "kernel_sum", "isotropic"}));
-  app.add_option("--voxel-size", o.voxel_size, "Voxel size in m (default: particle spacing / 2)")->check(CLI::PositiveNumber);
-  app.add_option("--resolution", o.resolution,
-                 "Paper's fixed grid: voxel = longest side of the padded bounding box / (N - 1), e.g. 200 (default off)")
-      ->check(CLI::Range(2, 4096));
-  app.add_option("--r-iso", o.r_iso, "Ellipsoid level r_iso in particle spacings (default 0.75)")->check(CLI::Range(1e-3, 4.0));
-  app.add_option("--lambda", o.lambda, "Yu & Turk centre smoothing, 0 = off (default 0.9)")->check(CLI::Range(0.0, 1.0));
-  app.add_option("--kr", o.k_r, "Largest stretch ratio k_r (default 4)")->check(CLI::Range(1.0, 1000.0));
-  app.add_option("--ks", o.k_s, "Stretch scale k_s in 1/m^2; 0 = automatic 1/(0.2994 h^2) (default 0)")->check(CLI::NonNegativeNumber);
-  app.add_option("--kn", o.k_n, "Stretch of particles with fewer than N_eps neighbours (default 0.5; kernel_sum only: ellipsoids are scaled to the r_iso sphere volume)")->check(CLI::Range(1e-3, 10.0));
-  app.add_option("--neps", o.n_eps, "Minimum neighbour count N_eps for a trusted PCA (default 6)")->check(CLI::Range(0, 1000));
-  app.add_option("--iso", o.iso, "Iso value of the kernel_sum field (default 0.5)")->check(CLI::PositiveNumber);
-  app.add_option("--close", o.close,
-                 "Closing radius in particle spacings: dilates, then erodes the level set, filling gaps narrower than twice it (default 0.5)")
-      ->check(CLI::Range(0.0, 4.0));
-  app.add_option("--smooth", o.smooth, "OpenVDB level-set mean-curvature smoothing iterations after the closing, for the ellipsoids and isotropic fields (default 10)")
-      ->check(CLI::Range(0, 100));
-  app.add_flag("--vel", o.velocity, "Add a `vel` vec3 grid (particle velocities, for motion blur) to the VDB");
-  app.add_flag("--density", o.density, "Add a `density` fog grid (Blender's volume shader shows it without setup)");
-  app.add_option("--format", o.formats, "Comma-separated outputs among obj, ply, vdb (default obj,vdb)");
+  tool::OverrideFlags<io::SurfaceSettings> overrides;
+  overrides.AddTo(app);
+  app.add_option("--field", o.field, "Field for every phase (else the scene's ice_field and water_field): ellipsoids, kernel_sum or isotropic")
+      ->check(CLI::IsMember(io::EnumNames<io::SurfaceField>()));
   app.add_flag("--strict", o.strict, "Refuse ice frames without stored anisotropy instead of falling back to isotropic");
   app.add_flag("--keep-voids", o.keep_voids, "Keep enclosed gaps between ellipsoids as voids (inner shells in the mesh)");
 
@@ -206,51 +181,42 @@ int main(int argc, char** argv) {
     sandbox.Require(o.output, "-o", ExitCode::kUsage);
     if (!o.scene.empty()) sandbox.Require(o.scene, "--scene", ExitCode::kUsage);
     MemoryBudget budget = tool::Budget(common);
-    io::SurfaceSettings defaults;
-    if (!o.scene.empty()) defaults = io::LoadScene(o.scene).surface;
-    if (common.memory_budget.empty() && defaults.memory_budget_gb > 0)
-      budget = {std::uint64_t(defaults.memory_budget_gb * 1e9), o.scene + ": surface.memory_budget_gb"};
-    const std::string phase = o.phase.empty() ? defaults.phase : o.phase;
-    std::vector<std::string> formats = defaults.formats;
-    if (!o.formats.empty()) {
-      formats.clear();
-      std::stringstream list(o.formats);
-      for (std::string f; std::getline(list, f, ',');) {
-        if (f != "obj" && f != "ply" && f != "vdb")
-          throw Error(ExitCode::kUsage, fmt::format("unknown format '{}' (expected obj, ply or vdb)", f), "--format");
-        formats.push_back(f);
-      }
-    }
-    const auto has = [&](const char* f) { return std::find(formats.begin(), formats.end(), f) != formats.end(); };
+    io::SurfaceSettings surfacing;
+    if (!o.scene.empty()) surfacing = io::LoadScene(o.scene).surface;
+    if (common.memory_budget.empty() && surfacing.memory_budget_gb > 0)
+      budget = {std::uint64_t(surfacing.memory_budget_gb * 1e9), o.scene + ": surface.memory_budget_gb"};
+    overrides.ApplyTo(surfacing);
+    if (overrides.Given("voxel_size") && surfacing.voxel_size > 0 && overrides.Given("resolution") && surfacing.resolution > 0)
+      throw Error(ExitCode::kUsage, "give --voxel-size or --resolution, not both");
+    if (surfacing.resolution == 1) throw Error(ExitCode::kUsage, "--resolution must be 0 (off) or at least 2");
+    if (surfacing.formats.empty()) throw Error(ExitCode::kUsage, "--format needs at least one of obj, ply, vdb");
+    const auto has = [&](const char* f) { return std::find(surfacing.formats.begin(), surfacing.formats.end(), f) != surfacing.formats.end(); };
 
     surface::Settings settings;
-    settings.voxel_ratio = defaults.voxel_ratio;
-    settings.voxel_size = o.voxel_size > 0 ? o.voxel_size : defaults.voxel_size;
-    settings.resolution = o.resolution >= 0 ? o.resolution : defaults.resolution;
-    if (o.voxel_size > 0 && o.resolution > 0) throw Error(ExitCode::kUsage, "give --voxel-size or --resolution, not both");
-    if (o.voxel_size > 0) settings.resolution = 0;
-    settings.r_iso = o.r_iso > 0 ? o.r_iso : defaults.r_iso;
-    settings.lambda = o.lambda >= 0 ? o.lambda : defaults.lambda;
-    settings.anisotropy.k_r = o.k_r > 0 ? o.k_r : defaults.k_r;
-    settings.anisotropy.k_s = o.k_s >= 0 ? o.k_s : defaults.k_s;
-    settings.anisotropy.k_n = o.k_n > 0 ? o.k_n : defaults.k_n;
-    settings.anisotropy.n_eps = o.n_eps >= 0 ? o.n_eps : defaults.n_eps;
-    settings.iso = o.iso > 0 ? o.iso : defaults.iso;
-    settings.half_band = defaults.half_band;
-    settings.close_radius = o.close >= 0 ? o.close : defaults.close;
-    settings.smooth_iterations = o.smooth >= 0 ? o.smooth : defaults.smooth;
-    settings.velocity_grid = (o.velocity || defaults.velocity) && has("vdb");
-    settings.density_grid = (o.density || defaults.density) && has("vdb");
+    settings.voxel_ratio = surfacing.voxel_ratio;
+    settings.voxel_size = surfacing.voxel_size;
+    // An explicit voxel size wins over the scene's fixed grid.
+    settings.resolution = overrides.Given("voxel_size") && surfacing.voxel_size > 0 ? 0 : surfacing.resolution;
+    settings.r_iso = surfacing.r_iso;
+    settings.lambda = surfacing.lambda;
+    settings.anisotropy.k_r = surfacing.k_r;
+    settings.anisotropy.k_s = surfacing.k_s;
+    settings.anisotropy.k_n = surfacing.k_n;
+    settings.anisotropy.n_eps = surfacing.n_eps;
+    settings.iso = surfacing.iso;
+    settings.half_band = surfacing.half_band;
+    settings.close_radius = surfacing.close;
+    settings.smooth_iterations = surfacing.smooth;
+    settings.velocity_grid = surfacing.velocity && has("vdb");
+    settings.density_grid = surfacing.density && has("vdb");
     settings.mesh = has("obj") || has("ply");
     settings.mesh_velocities = has("ply");
     settings.keep_voids = o.keep_voids;
 
     std::vector<PhaseJob> jobs;
-    const auto field_for = [&](const std::string& phase_default) {
-      return surface::ParseField(o.field.empty() ? phase_default : o.field);
-    };
-    if (phase == "ice" || phase == "both") jobs.push_back({io::Phase::kIce, "ice", field_for(defaults.ice_field)});
-    if (phase == "water" || phase == "both") jobs.push_back({io::Phase::kFluid, "water", field_for(defaults.water_field)});
+    const auto field_for = [&](surface::Field phase_default) { return o.field.empty() ? phase_default : surface::ParseField(o.field); };
+    if (surfacing.phase != io::SurfacePhases::kWater) jobs.push_back({io::Phase::kIce, "ice", field_for(surfacing.ice_field)});
+    if (surfacing.phase != io::SurfacePhases::kIce) jobs.push_back({io::Phase::kFluid, "water", field_for(surfacing.water_field)});
 
     const tool::FrameRange range = tool::ParseFrames(common.frames);
     const std::vector<FrameFile> frames = CollectFrames(o.inputs, range, !common.frames.empty());

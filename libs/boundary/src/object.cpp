@@ -21,7 +21,7 @@ void RequirePositive(double value, const std::string& what, const std::string& w
 
 std::string ProceduralKey(const io::SolidObject& o) {
   return fmt::format("shape={} size=({:.17g},{:.17g},{:.17g}) radius={:.17g} minor_radius={:.17g} height={:.17g} container={}",
-                     o.shape, o.size.x, o.size.y, o.size.z, o.radius, o.minor_radius, o.height, o.container);
+                     io::EnumName(o.shape), o.size.x, o.size.y, o.size.z, o.radius, o.minor_radius, o.height, o.container);
 }
 
 void Append(SurfaceSamples& all, SurfaceSamples&& part) {
@@ -39,7 +39,7 @@ void Append(SurfaceSamples& all, SurfaceSamples&& part) {
 BoundaryObject BuildBoundaryObject(const io::SolidObject& object, std::uint32_t object_id,
                                    const std::filesystem::path& mesh_path, const BoundarySettings& settings) {
   const auto start = std::chrono::steady_clock::now();
-  const bool from_file = object.shape == "mesh";
+  const bool from_file = object.shape == io::SolidShape::kMesh;
   const std::string where = from_file ? mesh_path.string() : "solid " + object.name;
   RequirePositive(settings.particle_spacing, "particle spacing", where);
   RequirePositive(object.spacing_ratio, "spacing ratio", where);
@@ -47,7 +47,7 @@ BoundaryObject BuildBoundaryObject(const io::SolidObject& object, std::uint32_t 
 
   BoundaryObject out;
   out.name = object.name;
-  out.shape = object.shape;
+  out.shape = io::EnumName(object.shape);
   out.object_id = object_id;
   out.particle_spacing = settings.particle_spacing;
   out.boundary_spacing = object.spacing_ratio * settings.particle_spacing;

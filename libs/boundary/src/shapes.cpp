@@ -171,22 +171,28 @@ io::TriMesh MakeTorus(double major_radius, double minor_radius, double max_edge)
 
 io::TriMesh MakeProceduralMesh(const io::SolidObject& o, double max_edge) {
   RequirePositive(max_edge, "tessellation edge length");
-  if (o.shape == "box") return MakeBox(o.size, o.container, max_edge);
-  if (o.shape == "plane") return MakePlane(o.size.x, o.size.y, max_edge);
-  if (o.shape == "sphere") return MakeSphere(o.radius, max_edge);
-  if (o.shape == "cylinder") return MakeCylinder(o.radius, o.height, max_edge);
-  if (o.shape == "torus") return MakeTorus(o.radius, o.minor_radius, max_edge);
-  throw InputError(fmt::format("'{}' is not a procedural shape (box, plane, sphere, cylinder, torus)", o.shape));
+  switch (o.shape) {
+    case io::SolidShape::kBox: return MakeBox(o.size, o.container, max_edge);
+    case io::SolidShape::kPlane: return MakePlane(o.size.x, o.size.y, max_edge);
+    case io::SolidShape::kSphere: return MakeSphere(o.radius, max_edge);
+    case io::SolidShape::kCylinder: return MakeCylinder(o.radius, o.height, max_edge);
+    case io::SolidShape::kTorus: return MakeTorus(o.radius, o.minor_radius, max_edge);
+    case io::SolidShape::kMesh: break;
+  }
+  throw InputError(fmt::format("'{}' is not a procedural shape (box, plane, sphere, cylinder, torus)", io::EnumName(o.shape)));
 }
 
 double ProceduralSurfaceArea(const io::SolidObject& o) {
   double area = 0;
   const Vec3d& s = o.size;
-  if (o.shape == "box") area = 2 * (s.x * s.y + s.y * s.z + s.z * s.x) - (o.container ? s.x * s.y : 0);
-  else if (o.shape == "plane") area = s.x * s.y;
-  else if (o.shape == "sphere") area = 4 * kPi * o.radius * o.radius;
-  else if (o.shape == "cylinder") area = 2 * kPi * o.radius * (o.height + o.radius);
-  else if (o.shape == "torus") area = 4 * kPi * kPi * o.radius * o.minor_radius;
+  switch (o.shape) {
+    case io::SolidShape::kBox: area = 2 * (s.x * s.y + s.y * s.z + s.z * s.x) - (o.container ? s.x * s.y : 0); break;
+    case io::SolidShape::kPlane: area = s.x * s.y; break;
+    case io::SolidShape::kSphere: area = 4 * kPi * o.radius * o.radius; break;
+    case io::SolidShape::kCylinder: area = 2 * kPi * o.radius * (o.height + o.radius); break;
+    case io::SolidShape::kTorus: area = 4 * kPi * kPi * o.radius * o.minor_radius; break;
+    case io::SolidShape::kMesh: break;
+  }
   const Vec3d& k = o.transform.scale;
   const double stretch = std::max({std::abs(k.x), std::abs(k.y), std::abs(k.z)});
   return area * stretch * stretch;
@@ -205,7 +211,7 @@ AffineTransform MakeTransform(const io::Transform& t) {
   Mat3<double> scale = Mat3<double>::Identity();
   for (int a = 0; a < 3; ++a) scale.m[a][a] = t.scale[a];
   // y-up -> z-up: a quarter turn about +x.
-  const Mat3<double> up = t.up_axis == "y" ? RotationXYZDegrees(Vec3d(90, 0, 0)) : Mat3<double>::Identity();
+  const Mat3<double> up = t.up_axis == io::UpAxis::kY ? RotationXYZDegrees(Vec3d(90, 0, 0)) : Mat3<double>::Identity();
   AffineTransform result;
   result.linear = RotationXYZDegrees(t.rotate_deg) * scale * up;
   result.offset = t.translate;
@@ -222,7 +228,7 @@ void ApplyTransform(io::TriMesh& mesh, const io::Transform& transform) {
 
 std::string DescribeTransform(const io::Transform& t) {
   return fmt::format("up {}, scale ({:g}, {:g}, {:g}), rotate ({:g}, {:g}, {:g}) deg X then Y then Z, translate ({:g}, {:g}, {:g}) m",
-                     t.up_axis, t.scale.x, t.scale.y, t.scale.z, t.rotate_deg.x, t.rotate_deg.y, t.rotate_deg.z,
+                     io::EnumName(t.up_axis), t.scale.x, t.scale.y, t.scale.z, t.rotate_deg.x, t.rotate_deg.y, t.rotate_deg.z,
                      t.translate.x, t.translate.y, t.translate.z);
 }
 

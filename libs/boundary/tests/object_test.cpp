@@ -34,7 +34,7 @@ void WriteText(const fs::path& path, const std::string& text) { std::ofstream(pa
 io::SolidObject MeshObject(const fs::path& file) {
   io::SolidObject o;
   o.name = "thing";
-  o.shape = "mesh";
+  o.shape = rime::io::SolidShape::kMesh;
   o.mesh = file;
   return o;
 }
@@ -42,7 +42,7 @@ io::SolidObject MeshObject(const fs::path& file) {
 TEST(BoundaryObject, ProceduralBoxWritesAReadableBoundaryFile) {
   io::SolidObject box;
   box.name = "tank";
-  box.shape = "box";
+  box.shape = rime::io::SolidShape::kBox;
   box.container = true;
   box.size = Vec3d(0.4, 0.3, 0.2);
   box.transform.translate = Vec3d(0, 0, 0.1);
@@ -196,7 +196,7 @@ TEST(BoundaryObject, SharedMeshes) {
     const fs::path file = meshes / c.file;
     if (!fs::exists(file)) GTEST_SKIP() << file << " is missing";
     io::SolidObject object = MeshObject(file);
-    object.transform.up_axis = "y";
+    object.transform.up_axis = rime::io::UpAxis::kY;
     BoundarySettings settings;
     settings.particle_spacing = c.size / 100;  // about 200 boundary particles across the object
     const BoundaryObject o = BuildBoundaryObject(object, 0, file, settings);

@@ -141,13 +141,13 @@ TEST(Shapes, RejectsBadDimensions) {
   EXPECT_THROW(MakeBox(Vec3d(1, -1, 1), false, 0.01), Error);
   EXPECT_THROW(MakeTorus(0.1, 0.2, 0.01), Error);
   io::SolidObject mesh_object;
-  mesh_object.shape = "mesh";
+  mesh_object.shape = rime::io::SolidShape::kMesh;
   EXPECT_THROW(MakeProceduralMesh(mesh_object, 0.01), Error);
 }
 
 TEST(Transform, OrderUpAxisAndMirror) {
   io::Transform t;
-  t.up_axis = "y";
+  t.up_axis = rime::io::UpAxis::kY;
   EXPECT_NEAR(Norm(MakeTransform(t).Apply(Vec3d(0, 1, 0)) - Vec3d(0, 0, 1)), 0, 1e-12);  // y-up source: y becomes z
   EXPECT_NEAR(Norm(MakeTransform(t).Apply(Vec3d(0, 0, 1)) - Vec3d(0, -1, 0)), 0, 1e-12);
   // Scale, then rotate X, Y, Z, then translate.

@@ -27,17 +27,17 @@ FreezeParams<T> MakeFreezeParams(const io::Scene& scene) {
   p.gravity_growth = T(f.gravity_growth);
   const double g = Norm(scene.solver.gravity);
   p.gravity_dir = g > 0 && scene.Enabled("gravity") ? Vec3<T>(scene.solver.gravity / g) : Vec3<T>{};
-  p.fr_clamp = f.fr_mode == "clamp";
-  p.ce_raw = f.ce_mode == "raw";
-  p.ce_sum = f.ce_aggregation == "sum";
-  p.isotropic = f.growth == "isotropic";
+  p.fr_clamp = f.fr_mode == io::FrMode::kClamp;
+  p.ce_raw = f.ce_mode == io::CeMode::kRaw;
+  p.ce_sum = f.ce_aggregation == io::CeAggregation::kSum;
+  p.isotropic = f.growth == io::Growth::kIsotropic;
   p.pca.k_s = T(f.k_s);
   p.pca.k_r = T(f.k_r);
   p.pca.k_n = T(f.k_n);
   p.pca.n_eps = f.n_eps;
   p.pca.s_min = T(f.s_min);
   p.pca.s_max = T(f.s_max);
-  p.pca.center_on_particle = f.pca_center == "particle";
+  p.pca.center_on_particle = f.pca_center == io::PcaCenter::kParticle;
   return p;
 }
 

@@ -101,21 +101,21 @@ TEST(Scene, QualityPresetsSetDefaultsAndExplicitValuesWin) {
   const Scene reference = ParseScene("[scene]\nquality = \"reference\"\n[simulation]\neta = 0.0005\n", "q.toml");
   EXPECT_EQ(reference.solver.eta, 0.0005) << "an explicit value overrides the preset";
   EXPECT_EQ(reference.solver.cfl, 0.2);
-  EXPECT_EQ(reference.fluid.precision, "double");
+  EXPECT_EQ(reference.fluid.precision, Precision::kDouble);
   const Scene plain = ParseScene("", "q.toml");
   EXPECT_EQ(plain.solver.eta, 0.001);
-  EXPECT_EQ(plain.fluid.precision, "float");
+  EXPECT_EQ(plain.fluid.precision, Precision::kFloat);
 }
 
 TEST(Scene, Im2013MethodPresetSetsTheBaselineAndExplicitValuesWin) {
   const Scene plain = ParseScene("", "m.toml");
-  EXPECT_EQ(plain.info.method, "rime");
-  EXPECT_EQ(plain.freezing.growth, "anisotropic");
-  EXPECT_EQ(plain.surface_tension.model, "he2014");
+  EXPECT_EQ(plain.info.method, Method::kRime);
+  EXPECT_EQ(plain.freezing.growth, Growth::kAnisotropic);
+  EXPECT_EQ(plain.surface_tension.model, SurfaceTensionModel::kHe2014);
   EXPECT_GT(plain.viscosity.wall_beta0, 0);
   const Scene im = ParseScene("[scene]\nmethod = \"im2013\"\n", "m.toml");
-  EXPECT_EQ(im.freezing.growth, "isotropic");
-  EXPECT_EQ(im.surface_tension.model, "akinci2013");
+  EXPECT_EQ(im.freezing.growth, Growth::kIsotropic);
+  EXPECT_EQ(im.surface_tension.model, SurfaceTensionModel::kAkinci2013);
   EXPECT_EQ(im.viscosity.wall_beta0, 0);
   const Scene sticky = ParseScene("[scene]\nmethod = \"im2013\"\n[simulation]\nmodules = [\"gravity\", \"viscosity\"]\n[viscosity]\nwall_beta0 = 0.5\n",
                                   "m.toml");

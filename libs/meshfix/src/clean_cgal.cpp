@@ -181,14 +181,14 @@ class Chain {
   void Load(const io::TriMesh& in) {
     Run("repair", [&] {
       std::size_t repeated = 0;
-      bool soup = settings_.repair == "always";
+      bool soup = settings_.repair == io::Repair::kAlways;
       std::size_t refused = 0;
       if (!soup) {
         refused = BuildDirect(in, mesh_, repeated);
         // A few refused faces (a non-manifold edge here and there in marching-cubes output) are
         // dropped and their holes filled later: far cheaper than repairing the whole soup.
         const std::size_t tolerated = std::max<std::size_t>(16, in.triangles.size() / 1000);
-        if (settings_.repair == "auto" && (refused > tolerated || BorderVerticesShareAPosition(mesh_))) soup = true;
+        if (settings_.repair == io::Repair::kAuto && (refused > tolerated || BorderVerticesShareAPosition(mesh_))) soup = true;
       }
       std::string detail;
       if (soup) {
@@ -203,7 +203,7 @@ class Chain {
         const std::size_t split = PMP::duplicate_non_manifold_vertices(mesh_);
         detail = fmt::format("built directly ({} faces with a repeated vertex skipped, {} non-manifold faces dropped, "
                              "{} non-manifold vertices split)", repeated, refused, split);
-        if (refused > 0 && settings_.repair == "never")
+        if (refused > 0 && settings_.repair == io::Repair::kNever)
           report_.warnings.push_back(fmt::format("{} non-manifold faces dropped on load (repair = \"never\")", refused));
       }
       // Orientation: outward normals for closed meshes. A soup may contain nested shells, which
@@ -330,9 +330,9 @@ class Chain {
   }
 
   void Smooth() {
-    if (settings_.smooth != "none" && settings_.smooth_iterations > 0 && !mesh_.is_empty()) {
+    if (settings_.smooth != io::MeshSmoothing::kNone && settings_.smooth_iterations > 0 && !mesh_.is_empty()) {
       Run("smooth", [&] {
-        if (settings_.smooth == "tangential") {
+        if (settings_.smooth == io::MeshSmoothing::kTangential) {
           PMP::tangential_relaxation(vertices(mesh_), mesh_, params::number_of_iterations(settings_.smooth_iterations));
         } else {
           // Area smoothing needs Ceres (absent here; CGAL would print a warning): angles only.
@@ -341,7 +341,7 @@ class Chain {
                                                    .use_angle_smoothing(true)
                                                    .use_area_smoothing(false));
         }
-        return fmt::format("{} x {}", settings_.smooth_iterations, settings_.smooth);
+        return fmt::format("{} x {}", settings_.smooth_iterations, io::EnumName(settings_.smooth));
       });
     }
     if (settings_.shape_smooth_iterations > 0 && !mesh_.is_empty()) {
@@ -370,7 +370,7 @@ class Chain {
       const std::size_t target_faces = settings_.decimate_faces > 0 ? std::size_t(settings_.decimate_faces)
                                                                     : std::size_t(std::llround(settings_.decimate_ratio * double(faces)));
       if (target_faces >= faces && settings_.decimate_max_error <= 0) return std::string("nothing to do");
-      if (settings_.decimate_method == "batch") {
+      if (settings_.decimate_method == io::DecimateMethod::kBatch) {
         mesh_.collect_garbage();  // vertex and face indices become 0..n-1
         std::vector<Vec3d> points;
         points.reserve(mesh_.number_of_vertices());
@@ -404,7 +404,7 @@ class Chain {
   }
 
   void SelfIntersections() {
-    if (settings_.self_intersections == "off" || mesh_.is_empty()) return;
+    if (settings_.self_intersections == io::SelfIntersections::kOff || mesh_.is_empty()) return;
     auto count = [&] {
       std::vector<std::pair<FaceIndex, FaceIndex>> pairs;
       // Sequential: on a 1M-face ball CGAL 5.5's parallel variant took 3.8 s CPU on 1 thread and
@@ -417,7 +417,7 @@ class Chain {
       report_.self_intersecting_pairs = count();
       return fmt::format("{} intersecting face pairs", report_.self_intersecting_pairs);
     });
-    if (settings_.self_intersections == "remove" && report_.self_intersecting_pairs > 0) {
+    if (settings_.self_intersections == io::SelfIntersections::kRemove && report_.self_intersecting_pairs > 0) {
       Run("remove_self_intersections", [&] {
         const std::int64_t before = report_.self_intersecting_pairs;
         const bool solved = PMP::experimental::remove_self_intersections(mesh_, params::preserve_genus(false));

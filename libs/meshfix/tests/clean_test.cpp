@@ -149,10 +149,10 @@ TEST(Clean, DecimationToHalfKeepsHausdorffDistanceSmall) {
   io::TriMesh sphere = procedural::Icosphere(1.0, 5);
   procedural::AddRadialNoise(sphere, 0.002, 7);
   io::CleanupSettings only_decimate;
-  only_decimate.smooth = "none";
-  only_decimate.self_intersections = "off";
+  only_decimate.smooth = io::MeshSmoothing::kNone;
+  only_decimate.self_intersections = io::SelfIntersections::kOff;
   only_decimate.decimate_ratio = 0.5;
-  ASSERT_EQ(only_decimate.decimate_method, "batch");  // the default
+  ASSERT_EQ(only_decimate.decimate_method, io::DecimateMethod::kBatch);  // the default
   const CleanResult r = Clean(sphere, only_decimate);
   const double mean_edge = r.report.before.mean_edge_length;
   EXPECT_NEAR(double(r.mesh.triangle_count()), 0.5 * double(sphere.triangle_count()), 0.01 * double(sphere.triangle_count()));
@@ -166,7 +166,7 @@ TEST(Clean, DecimationToHalfKeepsHausdorffDistanceSmall) {
 
   // Against CGAL's edge_collapse with the same quadrics (strictly greedy): no worse than 1.5x.
   io::CleanupSettings with_cgal = only_decimate;
-  with_cgal.decimate_method = "cgal";
+  with_cgal.decimate_method = io::DecimateMethod::kCgal;
   const CleanResult c = Clean(sphere, with_cgal);
   EXPECT_EQ(c.mesh.triangle_count(), r.mesh.triangle_count());
   const double hausdorff_cgal = HausdorffDistance(sphere, c.mesh);
@@ -301,9 +301,9 @@ TEST(Clean, EveryOperationCanBeSwitchedOff) {
   none.remove_degenerate = false;
   none.remove_components = false;
   none.fill_holes = false;
-  none.smooth = "none";
+  none.smooth = io::MeshSmoothing::kNone;
   none.decimate = false;
-  none.self_intersections = "off";
+  none.self_intersections = io::SelfIntersections::kOff;
   const CleanResult r = Clean(sphere, none);
   // Same triangles (the hole left one vertex unused, which is dropped, so compare positions).
   ASSERT_EQ(r.mesh.triangle_count(), sphere.triangle_count());
@@ -322,14 +322,14 @@ TEST(Clean, SmoothingAndShapeSmoothingKeepVolume) {
   io::TriMesh sphere = procedural::Icosphere(1.0, 4);
   procedural::AddRadialNoise(sphere, 0.01, 3);
   const double volume = ComputeStats(sphere).volume;
-  for (const char* mode : {"tangential", "angle"}) {
+  for (const io::MeshSmoothing mode : {io::MeshSmoothing::kTangential, io::MeshSmoothing::kAngle}) {
     io::CleanupSettings s;
     s.smooth = mode;
     s.shape_smooth_iterations = 2;
     s.decimate = false;
     const CleanResult r = Clean(sphere, s);
-    EXPECT_NEAR(r.report.after.volume, volume, 0.01 * volume) << mode;
-    EXPECT_TRUE(r.report.closed()) << mode;
+    EXPECT_NEAR(r.report.after.volume, volume, 0.01 * volume) << io::EnumName(mode);
+    EXPECT_TRUE(r.report.closed()) << io::EnumName(mode);
   }
 }
 
@@ -378,7 +378,7 @@ TEST(Clean, NonManifoldInputIsRepairedOrFlagged) {
 
   io::CleanupSettings s;
   s.decimate = false;
-  s.repair = "always";
+  s.repair = io::Repair::kAlways;
   const CleanResult r = Clean(m, s);
   EXPECT_EQ(r.report.repair_path, "soup");
   EXPECT_EQ(r.report.after.non_manifold_edges, 0u);
@@ -386,14 +386,14 @@ TEST(Clean, NonManifoldInputIsRepairedOrFlagged) {
   EXPECT_EQ(r.report.before.non_manifold_edges, in.non_manifold_edges);
 
   // "auto" drops the few non-manifold faces, splits the bow-tie vertex and fills the holes.
-  s.repair = "auto";
+  s.repair = io::Repair::kAuto;
   const CleanResult automatic = Clean(m, s);
   EXPECT_EQ(automatic.report.repair_path, "direct") << automatic.report.operations[0].detail;
   EXPECT_TRUE(automatic.report.manifold());
   EXPECT_EQ(automatic.report.after.components, 2u);
 
   // With repair = "never" the offending faces are dropped and the report says so.
-  s.repair = "never";
+  s.repair = io::Repair::kNever;
   const CleanResult never = Clean(m, s);
   EXPECT_GT(never.report.faces_dropped_on_load, 0u);
   EXPECT_FALSE(never.report.warnings.empty());
@@ -440,8 +440,8 @@ self_intersections = "remove"
   EXPECT_DOUBLE_EQ(scene.cleanup.target_edge, 0.004);
   EXPECT_DOUBLE_EQ(scene.cleanup.decimate_ratio, 0.25);
   EXPECT_EQ(scene.cleanup.min_component_faces, 10);
-  EXPECT_EQ(scene.cleanup.smooth, "angle");
-  EXPECT_EQ(scene.cleanup.self_intersections, "remove");
+  EXPECT_EQ(scene.cleanup.smooth, io::MeshSmoothing::kAngle);
+  EXPECT_EQ(scene.cleanup.self_intersections, io::SelfIntersections::kRemove);
   EXPECT_TRUE(scene.cleanup.fill_holes);  // default kept
 
   for (const char* bad : {"[cleanup]\ndecimate_ratio = 1.5\n", "[cleanup]\nsmooth = \"laplace\"\n",
@@ -473,7 +473,7 @@ TEST(Clean, SelfIntersectionsAreReportedAndRemovalIsHonest) {
   const CleanResult reported = Clean(m, s);
   EXPECT_GT(reported.report.self_intersecting_pairs, 0);
 
-  s.self_intersections = "remove";
+  s.self_intersections = io::SelfIntersections::kRemove;
   const CleanResult removed = Clean(m, s);
   ASSERT_GE(removed.report.self_intersecting_pairs, 0);
   if (removed.report.self_intersecting_pairs == 0) {
@@ -484,7 +484,7 @@ TEST(Clean, SelfIntersectionsAreReportedAndRemovalIsHonest) {
     for (const auto& w : removed.report.warnings) warned |= w.find("remove_self_intersections") != std::string::npos;
     EXPECT_TRUE(warned);
   }
-  s.self_intersections = "off";
+  s.self_intersections = io::SelfIntersections::kOff;
   EXPECT_EQ(Clean(m, s).report.self_intersecting_pairs, -1);
 }
 

@@ -137,7 +137,7 @@ StepStats Simulation<T>::SolvePressure(double dt, double omega) {
   for (auto* a : {&st.advected_error, &st.a_ii, &st.pressure, &st.pressure_next, &st.compression}) a->resize(n);
   st.d_ii.resize(n);
   st.s.resize(n);
-  const T chi = solver.aii_boundary == "splishsplash" ? T(1) : T(0);
+  const T chi = solver.aii_boundary == io::AiiBoundary::kSplishSplash ? T(1) : T(0);
   exec::ParallelFor(device_, n,
                     kernels::PredictAdvection<T>{.ff = s.FF(), .fb = s.FB(), .v_adv = st.v_adv.data(), .boundary_v = s.boundary.v.data(),
                                                  .boundary_psi = s.boundary.psi.data(), .density = s.fluid.density.data(),

@@ -59,7 +59,7 @@ std::pair<double, std::string> ExplicitStepLimit(const io::Scene& scene, const M
   }
   if (modules.Enabled("surface_tension")) {
     const io::SurfaceTensionSettings& st = scene.surface_tension;
-    if (st.model == "akinci2013") {
+    if (st.model == io::SurfaceTensionModel::kAkinci2013) {
       const double g = std::max(st.gamma, st.beta);
       if (g > 0) bound(0.25 * std::sqrt(h / (g * rho0)), st.gamma >= st.beta ? "surface_tension.gamma" : "surface_tension.beta");
     } else {
@@ -75,8 +75,6 @@ std::pair<double, std::string> ExplicitStepLimit(const io::Scene& scene, const M
 template <class T>
 Simulation<T>::Simulation(const io::Scene& scene, const exec::Device& device) : scene_(scene), device_(device) {
   for (const std::string& m : scene.modules) modules_.Enable(m);
-  if (modules_.Enabled("freezing") && scene.freezing.pca != "w2h")
-    throw InputError("freezing.pca = \"yu_turk\" (4h neighbourhood) is not implemented yet; use \"w2h\"", scene.file.string() + ": freezing.pca");
   state_ = std::make_unique<State>(device, scene, modules_);
   emitter_travel_.assign(scene.emitters.size(), 0.0);
 }
@@ -175,11 +173,11 @@ void Simulation<T>::Initialize() {
   const T support = T(2 * scene_.fluid.smoothing_length());
   {
     const auto [limit, parameter] = ExplicitStepLimit(scene_, modules_);
-    if (scene_.solver.time_step == "cfl" && limit < scene_.solver.dt_min)
+    if (scene_.solver.time_step == io::TimeStep::kCfl && limit < scene_.solver.dt_min)
       throw InputError(fmt::format("{} needs time steps below {:.3g} s for stability, but simulation.dt_min is {:.3g} s: lower {} or dt_min",
                                    parameter, limit, scene_.solver.dt_min, parameter),
                        SceneField(scene_, parameter));
-    if (scene_.solver.time_step == "fixed" && scene_.solver.dt > limit)
+    if (scene_.solver.time_step == io::TimeStep::kFixed && scene_.solver.dt > limit)
       log::Warn("simulation.dt = {:.3g} s exceeds the stability limit {:.3g} s set by {}: expect the run to diverge", scene_.solver.dt, limit,
                 parameter);
   }
@@ -226,7 +224,7 @@ template <class T>
 double Simulation<T>::NextTimeStep(double next_stop) const {
   const io::SolverSettings& solver = scene_.solver;
   double dt = solver.dt;
-  if (solver.time_step == "cfl") {
+  if (solver.time_step == io::TimeStep::kCfl) {
     const State& s = *state_;
     double max_speed = 0;
     if (s.n() > 0) {
@@ -296,7 +294,7 @@ void Simulation<T>::CheckDivergence(const StepStats& stats) const {
                                                          courant, kMaxSpacingsPerStep)
                                            : fmt::format("average density error {:.3g}% exceeds the limit {:.3g}% (simulation.divergence_density_error)",
                                                      100 * stats.average_density_error, 100 * limit);
-  const char* advice = scene_.solver.time_step == "fixed" ? "Reduce simulation.dt" : "Reduce simulation.cfl or dt_max";
+  const char* advice = scene_.solver.time_step == io::TimeStep::kFixed ? "Reduce simulation.dt" : "Reduce simulation.cfl or dt_max";
   throw Error(ExitCode::kDiverged, fmt::format("simulation diverged at step {} (t = {:.6g} s, dt = {:.3g} s): {}; {}. {}, or check the scene",
                                                step_count_, time_, stats.dt, reason, particle, advice));
 }

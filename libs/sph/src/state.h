@@ -164,8 +164,8 @@ template <class T>
 struct Simulation<T>::State {
   State(const exec::Device& d, const io::Scene& scene, ModuleRegistry& modules)
       : fluid(d), step(d), boundary(d), pairs(d), pool(d), fluid_grid(d), boundary_grid(d), motions(d), keep(d), slot(d), order(d) {
-    AllocateIf(color_field, d, modules, scene.surface_tension.model != "akinci2013");
-    AllocateIf(normals, d, modules, scene.surface_tension.model == "akinci2013");
+    AllocateIf(color_field, d, modules, scene.surface_tension.model != io::SurfaceTensionModel::kAkinci2013);
+    AllocateIf(normals, d, modules, scene.surface_tension.model == io::SurfaceTensionModel::kAkinci2013);
     AllocateIf(freezing, d, modules);
     AllocateIf(freezing_fluid, d, modules, scene.freezing.freeze_delay > 0);
     AllocateIf(freezing_work, d, modules);

@@ -27,7 +27,7 @@ void Simulation<T>::SeedWater(const Enclosure& enclosure) {
   std::vector<Vec3<T>> x;
   std::vector<Vec3<T>> v;
   for (const io::FluidBlock& block : scene_.fluid_blocks) {
-    if (block.shape == "box") {
+    if (block.shape == io::BlockShape::kBox) {
       const Vec3d ext = block.max - block.min;
       const std::int64_t nx = std::int64_t(std::floor(ext.x / dp + 1e-6)) + 1, ny = std::int64_t(std::floor(ext.y / dp + 1e-6)) + 1,
                          nz = std::int64_t(std::floor(ext.z / dp + 1e-6)) + 1;
@@ -135,8 +135,8 @@ void Simulation<T>::Emit(double dt, StepStats& stats) {
     const Vec3d helper = std::fabs(dir.z) < 0.9 ? Vec3d(0, 0, 1) : Vec3d(1, 0, 0);
     const Vec3d u = Cross(dir, helper) / Norm(Cross(dir, helper));
     const Vec3d w = Cross(dir, u);
-    const double half_u = em.shape == "disc" ? em.radius : em.width / 2;
-    const double half_w = em.shape == "disc" ? em.radius : em.height / 2;
+    const double half_u = em.shape == io::EmitterShape::kDisc ? em.radius : em.width / 2;
+    const double half_w = em.shape == io::EmitterShape::kDisc ? em.radius : em.height / 2;
     const std::int64_t nu = std::int64_t(std::floor(half_u / dp + 1e-9)), nw = std::int64_t(std::floor(half_w / dp + 1e-9));
     while (emitter_travel_[e] >= dp) {
       emitter_travel_[e] -= dp;
@@ -144,7 +144,7 @@ void Simulation<T>::Emit(double dt, StepStats& stats) {
       const Vec3d base = em.center + dir * emitter_travel_[e];
       for (std::int64_t a = -nu; a <= nu; ++a)
         for (std::int64_t b = -nw; b <= nw; ++b) {
-          if (em.shape == "disc" && std::hypot(a * dp, b * dp) > em.radius + 1e-9) continue;
+          if (em.shape == io::EmitterShape::kDisc && std::hypot(a * dp, b * dp) > em.radius + 1e-9) continue;
           new_x.push_back(ToT<T>(base + u * (a * dp) + w * (b * dp)));
           new_v.push_back(ToT<T>(dir * em.speed));
         }

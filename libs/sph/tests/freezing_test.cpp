@@ -110,7 +110,7 @@ TEST(Freezing, ConversionToIceDoesNotKickTheWater) {
   io::Scene scene = test::ColumnScene(dp, 10, 3, 20, 0);
   scene.modules = {"gravity", "freezing"};
   scene.freezing.glaze_threshold = 0.05, scene.freezing.icicle_threshold = 0.01;
-  scene.solver.time_step = "cfl", scene.solver.eta = 1e-5, scene.solver.cfl = 0.1, scene.solver.max_iterations = 1000;
+  scene.solver.time_step = rime::io::TimeStep::kCfl, scene.solver.eta = 1e-5, scene.solver.cfl = 0.1, scene.solver.max_iterations = 1000;
   Simulation<double> sim(scene, exec::Device::Cpu());
   sim.AddBoundaryObject(test::BoxBoundary(dp, 6 * a, test::BoxWidth(dp, 3), 2.5 * a), "box");
   sim.Initialize();
@@ -201,9 +201,9 @@ IceShape StreamOverPlate(double direction, const std::string& growth) {
   // mostly glaze, at 0.005 its youngest ice sat upstream.)
   scene.freezing.glaze_threshold = 0.05;
   scene.freezing.icicle_threshold = 0.003;
-  scene.freezing.growth = growth;
+  io::ParseEnum(growth, scene.freezing.growth);
   io::Emitter e;
-  e.shape = "disc";  // a thin jet: three particles across
+  e.shape = rime::io::EmitterShape::kDisc;  // a thin jet: three particles across
   e.center = {0.36 - direction * 0.25, 0.36, 0.05};
   e.direction = {direction, 0, -0.2};
   e.radius = 0.021;
@@ -257,7 +257,7 @@ TEST(Freezing, SlowWaterTouchingAWallFreezesInAThinLayer) {
   scene.freezing.glaze_threshold = 0.01;
   scene.freezing.icicle_threshold = 0.05;
   io::Emitter e;
-  e.shape = "rectangle";
+  e.shape = rime::io::EmitterShape::kRectangle;
   e.center = {0.6 * kDp, 0.36, 0.25};  // touching the wall particles (d_b = d_p/2)
   e.direction = {0, 0, -1};
   e.width = 0.12;   // a sheet along the wall (width runs along y for a downward nozzle)

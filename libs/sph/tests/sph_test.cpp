@@ -193,7 +193,7 @@ TEST(Iisph, OutputFramesDoNotJoltWaterAtRest) {
   for (const double fps : {24.0, 25.0}) {
     io::Scene scene = test::ColumnScene(0.02, 8, 8, 8, 0.3);
     scene.modules = {"gravity", "viscosity"};
-    scene.solver.time_step = "cfl";
+    scene.solver.time_step = rime::io::TimeStep::kCfl;
     auto sim = MakeColumn<float>(scene, 8, 8, 8, 0.3);
     int frame = 1;
     auto run_frame = [&](std::vector<double>& steps) {
@@ -265,7 +265,7 @@ TEST(Iisph, MeasuredDensityErrorIsTheActualCompression) {
 TEST(Iisph, TallColumnSettlesUnderTheDefaultAdaptiveStep) {
   const double dp = 0.0125;
   io::Scene scene = test::ColumnScene(dp, 16, 16, 40, 0);
-  scene.solver.time_step = "cfl";
+  scene.solver.time_step = rime::io::TimeStep::kCfl;
   scene.modules = {"gravity", "viscosity"};
   Simulation<float> sim(scene, exec::Device::Cpu());
   const double width = test::BoxWidth(dp, 16);
@@ -441,8 +441,8 @@ TEST(Iisph, SurfaceTensionRoundsAnElongatedBlock) {
     scene.fluid.spacing = dp;
     scene.modules = {"viscosity"};
     if (!model.empty()) scene.modules.insert("surface_tension");
-    scene.surface_tension.model = model.empty() ? "he2014" : model;
-    scene.solver.time_step = "fixed";
+    io::ParseEnum(model.empty() ? "he2014" : model, scene.surface_tension.model);
+    scene.solver.time_step = rime::io::TimeStep::kFixed;
     scene.solver.dt = 0.002;
     io::FluidBlock block;
     block.min = {0, 0, 0};
@@ -497,7 +497,7 @@ TEST(Iisph, ModuleThatIsOffAllocatesAndRunsNothing) {
 TEST(Iisph, ResumeIsBitIdentical) {
   io::Scene scene = test::ColumnScene(0.02, 6, 6, 6, 0.3);
   scene.modules = {"gravity", "viscosity", "surface_tension"};
-  scene.solver.time_step = "cfl";
+  scene.solver.time_step = rime::io::TimeStep::kCfl;
   scene.fluid_blocks[0].velocity = {0.5, 0.2, 0};
   auto straight = MakeColumn<float>(scene, 6, 6, 6, 0.3);
   while (straight->time() < 0.05 - 1e-9) straight->Step(straight->NextTimeStep(0.05));

@@ -71,7 +71,7 @@ inline io::Scene ColumnScene(double dp, int nx, int ny, int nz, double wall_heig
   io::Scene scene;
   scene.fluid.spacing = dp;
   scene.modules = {"gravity"};
-  scene.solver.time_step = "fixed";
+  scene.solver.time_step = rime::io::TimeStep::kFixed;
   scene.solver.dt = 0.002;
   io::FluidBlock block;
   block.min = {1.1 * dp, 1.1 * dp, 1.1 * dp};

@@ -13,20 +13,13 @@
 namespace rime::surface {
 
 Field ParseField(const std::string& name) {
-  if (name == "ellipsoids") return Field::kEllipsoids;
-  if (name == "kernel_sum") return Field::kKernelSum;
-  if (name == "isotropic") return Field::kIsotropic;
-  throw InputError(fmt::format("unknown field '{}' (expected ellipsoids, kernel_sum or isotropic)", name), "field");
+  Field field{};
+  if (!io::ParseEnum(name, field))
+    throw InputError(fmt::format("unknown field '{}' (expected ellipsoids, kernel_sum or isotropic)", name), "field");
+  return field;
 }
 
-const char* FieldName(Field field) {
-  switch (field) {
-    case Field::kEllipsoids: return "ellipsoids";
-    case Field::kKernelSum: return "kernel_sum";
-    case Field::kIsotropic: return "isotropic";
-  }
-  return "?";
-}
+const char* FieldName(Field field) { return io::EnumName(field).data(); }
 
 namespace {
 

@@ -103,9 +103,9 @@ smooth = 2
 formats = ["ply", "vdb"]
 )",
                                          "scene.toml");
-  EXPECT_EQ(scene.surface.phase, "both");
-  EXPECT_EQ(scene.surface.water_field, "isotropic");
-  EXPECT_EQ(scene.surface.ice_field, "ellipsoids");
+  EXPECT_EQ(scene.surface.phase, io::SurfacePhases::kBoth);
+  EXPECT_EQ(scene.surface.water_field, io::SurfaceField::kIsotropic);
+  EXPECT_EQ(scene.surface.ice_field, io::SurfaceField::kEllipsoids);
   EXPECT_DOUBLE_EQ(scene.surface.voxel_ratio, 0.25);
   EXPECT_DOUBLE_EQ(scene.surface.r_iso, 0.6);
   EXPECT_EQ(scene.surface.smooth, 2);

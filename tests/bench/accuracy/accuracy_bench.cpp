@@ -69,7 +69,7 @@ io::Scene BaseScene(const std::string& quality, int per_a, bool freezing) {
   scene.solver = preset.solver;
   scene.fluid.precision = preset.fluid.precision;
   scene.fluid.smoothing_ratio = preset.fluid.smoothing_ratio;
-  scene.solver.time_step = "cfl";
+  scene.solver.time_step = rime::io::TimeStep::kCfl;
   scene.modules = {"gravity"};
   if (freezing) {
     // The examples' calibrated thresholds; the tank walls and floor are the cold solid.
@@ -302,7 +302,7 @@ json RunVoxelSweep(const Setting& s) {
 }
 
 json RunJob(Job job, const Setting& s, double end_time) {
-  const bool dbl = s.scene.fluid.precision == "double";
+  const bool dbl = s.scene.fluid.precision == rime::io::Precision::kDouble;
   switch (job) {
     case Job::kDamBreak: return dbl ? RunSim<double>(s, end_time) : RunSim<float>(s, end_time);
     case Job::kHydrostatic: return dbl ? RunHydrostatic<double>(s) : RunHydrostatic<float>(s);
@@ -373,7 +373,7 @@ std::vector<Setting> Settings(bool with_freezing) {
   // The reference: the finest solver settings at the base spacing (double, eta 1e-5, CFL 0.1).
   auto reference = [](io::Scene& sc) {
     sc.solver.eta = 1e-5, sc.solver.cfl = 0.1, sc.solver.dt_max = 0.001, sc.solver.max_iterations = 2000;
-    sc.fluid.precision = "double";
+    sc.fluid.precision = rime::io::Precision::kDouble;
   };
   add("reference", "reference (double, eta 1e-5, CFL 0.1, dt_max 1 ms)", reference);
   add("default", "production defaults", none);
@@ -386,19 +386,19 @@ std::vector<Setting> Settings(bool with_freezing) {
   add("min_iterations", "min 2 iterations (Ihmsen; the default is 3)", [](io::Scene& sc) { sc.solver.min_iterations = 2; });
   for (double w : {0.3, 0.7}) add("omega", fmt::format("omega {:g}", w), [=](io::Scene& sc) { sc.solver.omega = w; });
   add("kernel", "h = 1.2 d_p", [](io::Scene& sc) { sc.fluid.smoothing_ratio = 1.2; });
-  add("precision", "double", [](io::Scene& sc) { sc.fluid.precision = "double"; });
+  add("precision", "double", [](io::Scene& sc) { sc.fluid.precision = rime::io::Precision::kDouble; });
   // Spec §6's two boundary terms of a_ii: the default counts wall particles as pushed by p_i, which
   // leaves water next to walls compressed whatever η is (the measured density error column).
   for (double eta : {1e-3, 1e-4})
     add("aii", fmt::format("a_ii consistent, eta {:g}", eta), [=](io::Scene& sc) {
-      sc.solver.aii_boundary = "consistent", sc.solver.eta = eta, sc.solver.max_iterations = 1000;
+      sc.solver.aii_boundary = rime::io::AiiBoundary::kConsistent, sc.solver.eta = eta, sc.solver.max_iterations = 1000;
     });
   for (const char* q : {"preview", "production", "reference"}) add("preset", std::string("preset ") + q, none, kBasePerA, q);
   // Preset candidates (combinations of the knobs above).
   auto combo = [](double eta, double cfl, double dt_max, int max_it, const char* precision) {
     return [=](io::Scene& sc) {
       sc.solver.eta = eta, sc.solver.cfl = cfl, sc.solver.dt_max = dt_max, sc.solver.max_iterations = max_it;
-      sc.fluid.precision = precision;
+      rime::io::ParseEnum(precision, sc.fluid.precision);
     };
   };
   add("candidate", "eta 1e-2, CFL 0.6, dt_max 6 ms", combo(1e-2, 0.6, 0.006, 100, "float"));
@@ -506,7 +506,7 @@ int main(int argc, char** argv) {
     row["group"] = s.group, row["label"] = s.label;
     row["eta"] = s.scene.solver.eta, row["cfl"] = s.scene.solver.cfl, row["dt_max"] = s.scene.solver.dt_max;
     row["omega"] = s.scene.solver.omega, row["smoothing_ratio"] = s.scene.fluid.smoothing_ratio;
-    row["precision"] = s.scene.fluid.precision, row["per_a"] = s.per_a, row["max_iterations"] = s.scene.solver.max_iterations;
+    row["precision"] = std::string(rime::io::EnumName(s.scene.fluid.precision)), row["per_a"] = s.per_a, row["max_iterations"] = s.scene.solver.max_iterations;
     row["wall_s"] = Median(wall), row["cpu_s"] = Median(cpu), row["peak_rss_mib"] = Median(rss), row["repeats"] = int(wall.size());
     if (s.label.rfind("reference (", 0) == 0) ref = row;
     if (s.label == "freezing: reference") fref = row;

@@ -117,7 +117,7 @@ int main(int argc, char** argv) {
     cases.push_back({"bunny 0.5 m, d_p 5 mm", [bunny] {
                        io::TriMesh m = io::ImportMesh(bunny);
                        io::Transform t;  // the bunny is about 0.16 m and y-up: scale its largest extent to 0.5 m
-                       t.up_axis = "y";
+                       t.up_axis = rime::io::UpAxis::kY;
                        t.scale = Vec3d::Splat(0.5 / 0.155);
                        boundary::ApplyTransform(m, t);
                        return m;

@@ -65,7 +65,7 @@ int main(int argc, char** argv) {
   int runs = 3, threads = 1;
   std::string json_path = "bench_clean.json", scratch = (fs::temp_directory_path() / "rime_bench_clean").string();
   bool remesh = false, keep = false, hausdorff = false;
-  std::string decimate_method = io::CleanupSettings{}.decimate_method;
+  std::string decimate_method(io::EnumName(io::CleanupSettings{}.decimate_method));
   app.add_option("--sizes", sizes, "Input triangle counts (approximate)");
   app.add_option("--shapes", shapes, "ball and/or torus")->check(CLI::IsMember({"ball", "torus"}));
   app.add_option("--runs", runs, "Runs per case (median reported)")->check(CLI::PositiveNumber);
@@ -82,7 +82,7 @@ int main(int argc, char** argv) {
 
   io::CleanupSettings settings;
   settings.remesh = remesh;
-  settings.decimate_method = decimate_method;
+  io::ParseEnum(decimate_method, settings.decimate_method);
   nlohmann::json results = nlohmann::json::array();
   fmt::print("rime-clean default chain, {} thread(s), median of {} run(s), decimation {}{}\n", threads, runs, decimate_method,
              remesh ? ", with remeshing" : "");

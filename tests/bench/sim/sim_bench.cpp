@@ -32,7 +32,7 @@ io::Scene DamBreak(double dp, double block, std::vector<std::string> modules) {
   io::Scene scene;
   scene.fluid.spacing = dp;
   scene.modules = {modules.begin(), modules.end()};
-  scene.solver.time_step = "fixed";
+  scene.solver.time_step = rime::io::TimeStep::kFixed;
   scene.solver.dt = 0.001;
   scene.solver.eta = 0.001;
   scene.freezing.glaze_threshold = 0.05;  // the examples' calibrated thresholds

@@ -26,10 +26,13 @@ namespace rime::io {
 struct Range {
   double min = -1e300, max = 1e300;
   bool min_exclusive = false, max_exclusive = false;
-  static Range Positive() { return {0, 1e300, true, false}; }
-  static Range NonNegative() { return {0, 1e300, false, false}; }
-  static Range Closed(double a, double b) { return {a, b, false, false}; }
-  static Range Any() { return {}; }
+  static constexpr Range Positive() { return {0, 1e300, true, false}; }
+  static constexpr Range NonNegative() { return {0, 1e300, false, false}; }
+  static constexpr Range Closed(double a, double b) { return {a, b, false, false}; }
+  static constexpr Range OpenClosed(double a, double b) { return {a, b, true, false}; }  // (a, b]
+  static constexpr Range Open(double a, double b) { return {a, b, true, true}; }
+  static constexpr Range Any() { return {}; }
+  bool IsAny() const { return min < -1e299 && max > 1e299; }
   bool Contains(double v) const;
   std::string Describe() const;
 };

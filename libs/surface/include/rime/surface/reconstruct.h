@@ -24,15 +24,16 @@
 #include "rime/core/anisotropy.h"
 #include "rime/core/math.h"
 #include "rime/io/mesh.h"
+#include "rime/io/scene_surface.h"
 
 namespace rime::surface {
 
-enum class Field {
-  kEllipsoids,  // union of anisotropic ellipsoids, φ = min_i ‖D_i (x − x̄_i)‖ − r_iso (Eq. 41): ice default;
-                // each of (at most) the volume of the r_iso sphere (det D_i = 1, see Prepare)
-  kKernelSum,   // Yu & Turk: Σ_i V_i W_A(x − x̄_i, G_i) at an iso value: water default
-  kIsotropic,   // union of spheres of radius r_iso (comparison baseline)
-};
+// kEllipsoids: union of anisotropic ellipsoids, φ = min_i ‖D_i (x − x̄_i)‖ − r_iso (Eq. 41): ice default;
+//   each of (at most) the volume of the r_iso sphere (det D_i = 1, see Prepare).
+// kKernelSum: Yu & Turk: Σ_i V_i W_A(x − x̄_i, G_i) at an iso value: water default.
+// kIsotropic: union of spheres of radius r_iso (comparison baseline).
+// The scene's `[surface] ice_field` names the same enum.
+using Field = io::SurfaceField;
 Field ParseField(const std::string& name);  // "ellipsoids" | "kernel_sum" | "isotropic"
 const char* FieldName(Field field);
 

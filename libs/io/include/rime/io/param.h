@@ -1,0 +1,178 @@
+/// @file param.h
+/// @brief One declaration per scene field: name, unit, range, choices, help and command-line flag.
+///
+/// Every settings struct of the scene keeps its defaults as member initialisers and lists each field
+/// once in a static `Visit(settings, f)`, calling `f(Param{...}, settings.field)`. The TOML loader
+/// (LoadSettings), the tools' override flags (tools/common/override_flags.h) and the tables of
+/// docs/scene-reference.md (MarkdownTable) are visitors over that one list, so adding a field
+/// touches one struct.
+///
+/// @code
+/// struct AirPressureSettings {
+///   double p_atm = 5000;
+///   template <class Self, class F> static void Visit(Self& s, F&& f) {
+///     f(Param{.name = "p_atm", .unit = "Pa", .range = Range::NonNegative(), .help = "air pressure"}, s.p_atm);
+///   }
+/// };
+/// @endcode
+///
+/// A string option is an enum from the moment it is loaded: the enum's values are the indices of
+/// the names that `Names(E)` returns (found by argument-dependent lookup beside the enum).
+#pragma once
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cstdint>
+#include <filesystem>
+#include <span>
+#include <string>
+#include <string_view>
+#include <type_traits>
+#include <vector>
+
+#include "rime/core/math.h"
+#include "rime/io/toml_reader.h"
+
+namespace rime::io {
+
+struct Param {
+  std::string_view name;          // TOML key
+  std::string_view unit = {};     // SI unit or what the value counts ("d_p", "voxels"); empty: a plain number
+  Range range = Range::Any();     // numbers, integers and every component of a vector
+  std::string_view help = {};     // one line: the flag's help and the start of the docs' meaning column
+  std::string_view doc = {};      // docs only, appended to `help` (markdown)
+  std::string_view flag = {};     // command-line override in CLI11 syntax ("--kr", "!--no-velocity"); empty: none
+  std::string_view default_doc = {};  // docs: the default in words when the value alone does not say it
+  std::span<const std::string_view> choices = {};  // allowed names of a string list
+  bool scalar_or_vector = false;  // a vector also accepts one number for all three components
+};
+
+template <class E>
+concept NamedEnum = std::is_enum_v<E> && requires(E e) {
+  { Names(e) } -> std::convertible_to<std::span<const std::string_view>>;
+};
+
+template <NamedEnum E>
+std::string_view EnumName(E value) {
+  return Names(value)[std::size_t(value)];
+}
+
+template <NamedEnum E>
+std::vector<std::string> EnumNames() {
+  const std::span<const std::string_view> names = Names(E{});
+  return {names.begin(), names.end()};
+}
+
+/// The enum value named `name`; false when no value has that name.
+template <NamedEnum E>
+bool ParseEnum(std::string_view name, E& value) {
+  const std::span<const std::string_view> names = Names(E{});
+  const auto it = std::find(names.begin(), names.end(), name);
+  if (it == names.end()) return false;
+  value = E(it - names.begin());
+  return true;
+}
+
+/// Reads each field a settings struct declares from a TOML table, keeping the current value of
+/// those the table does not set.
+class TomlLoader {
+ public:
+  explicit TomlLoader(TomlReader& table) : t_(table) {}
+
+  void operator()(const Param& p, double& v) const { v = t_.Number(Key(p), v, p.range); }
+  void operator()(const Param& p, int& v) const { v = static_cast<int>(t_.Integer(Key(p), v, p.range)); }
+  void operator()(const Param& p, long long& v) const { v = t_.Integer(Key(p), v, p.range); }
+  void operator()(const Param& p, bool& v) const { v = t_.Bool(Key(p), v); }
+  void operator()(const Param& p, std::string& v) const { v = t_.String(Key(p), v); }
+  void operator()(const Param& p, std::filesystem::path& v) const { v = t_.String(Key(p), v.string()); }
+  void operator()(const Param& p, Vec3d& v) const {
+    v = p.scalar_or_vector ? t_.ScalarOrVector(Key(p), v, p.range) : t_.Vector(Key(p), v, p.range);
+  }
+  void operator()(const Param& p, std::vector<std::string>& v) const {
+    if (t_.Has(Key(p))) v = t_.StringList(Key(p), {p.choices.begin(), p.choices.end()});
+  }
+  template <NamedEnum E>
+  void operator()(const Param& p, E& v) const {
+    ParseEnum(t_.String(Key(p), std::string(EnumName(v)), EnumNames<E>()), v);
+  }
+
+ private:
+  static std::string Key(const Param& p) { return std::string(p.name); }
+  TomlReader& t_;
+};
+
+/// Loads every field `Settings::Visit` declares from `table`.
+template <class Settings>
+void LoadSettings(TomlReader& table, Settings& settings) {
+  Settings::Visit(settings, TomlLoader(table));
+}
+
+/// A value as the docs and the flags' help show it.
+inline std::string FormatValue(double v) { return fmt::format("{}", v); }
+inline std::string FormatValue(long long v) { return fmt::format("{}", v); }
+inline std::string FormatValue(int v) { return fmt::format("{}", v); }
+inline std::string FormatValue(bool v) { return v ? "true" : "false"; }
+inline std::string FormatValue(const std::string& v) { return fmt::format("\"{}\"", v); }
+inline std::string FormatValue(const std::filesystem::path& v) { return FormatValue(v.string()); }
+inline std::string FormatValue(const Vec3d& v) { return fmt::format("[{}, {}, {}]", v.x, v.y, v.z); }
+inline std::string FormatValue(const std::vector<std::string>& v) {
+  std::string out = "[";
+  for (std::size_t k = 0; k < v.size(); ++k) out += fmt::format("{}\"{}\"", k ? ", " : "", v[k]);
+  return out + "]";
+}
+template <NamedEnum E>
+std::string FormatValue(E v) {
+  return fmt::format("\"{}\"", EnumName(v));
+}
+
+/// What a field accepts, in words: a range, or the names of an enum or a list.
+std::string DescribeAccepted(const Param& p, std::span<const std::string_view> names);
+template <class T>
+std::string DescribeAccepted(const Param& p, const T&) {
+  if constexpr (NamedEnum<T>) return DescribeAccepted(p, Names(T{}));
+  else if constexpr (std::is_same_v<T, std::vector<std::string>>) return DescribeAccepted(p, p.choices);
+  else if constexpr (std::is_same_v<T, bool> || std::is_same_v<T, std::string> || std::is_same_v<T, std::filesystem::path>) return "";
+  else return DescribeAccepted(p, std::span<const std::string_view>());
+}
+
+/// The markdown table of one settings struct: key, unit, default, accepted values, meaning.
+template <class Settings>
+std::string MarkdownTable(std::string_view key_prefix = {}) {
+  std::string out = "| key | unit | default | accepted | meaning |\n|---|---|---|---|---|\n";
+  const Settings defaults{};
+  Settings::Visit(defaults, [&](const Param& p, const auto& value) {
+    const std::string meaning = p.doc.empty() ? std::string(p.help) : fmt::format("{} {}", p.help, p.doc);
+    out += fmt::format("| `{}{}` | {} | {} | {} | {} |\n", key_prefix, p.name, p.unit,
+                       p.default_doc.empty() ? FormatValue(value) : std::string(p.default_doc), DescribeAccepted(p, value),
+                       meaning);
+  });
+  return out;
+}
+
+inline constexpr std::string_view kFlagTableHeader =
+    "| flag | scene key | default | accepted | meaning |\n|---|---|---|---|---|\n";
+
+/// Rows of a markdown table (kFlagTableHeader) of the command-line flags a settings struct declares.
+template <class Settings>
+std::string FlagRows() {
+  std::string out;
+  const Settings defaults{};
+  Settings::Visit(defaults, [&](const Param& p, const auto& value) {
+    if (p.flag.empty()) return;
+    std::string flags;  // "--remesh,!--no-remesh" -> `--remesh`, `--no-remesh`
+    for (std::size_t start = 0; start <= p.flag.size();) {
+      const std::size_t comma = std::min(p.flag.find(',', start), p.flag.size());
+      std::string_view name = p.flag.substr(start, comma - start);
+      if (!name.empty() && name.front() == '!') name.remove_prefix(1);
+      flags += fmt::format("{}`{}`", flags.empty() ? "" : ", ", name);
+      start = comma + 1;
+    }
+    const std::string shown = p.default_doc.empty() ? FormatValue(value) : std::string(p.default_doc);
+    out += fmt::format("| {} | `{}` | {}{}{} | {} | {} |\n", flags, p.name, shown, p.unit.empty() ? "" : " ", p.unit,
+                       DescribeAccepted(p, value), p.help);
+  });
+  return out;
+}
+
+}  // namespace rime::io

@@ -1,0 +1,40 @@
+/// @file scene_bake.h
+/// @brief `[bake]` section of the scene file: the preview settings only rime-bake reads
+/// (LoadScene skips the table; rime-bake loads it with LoadSettings).
+#pragma once
+
+#include <span>
+#include <string_view>
+
+#include "rime/io/param.h"
+
+namespace rime::io {
+
+enum class PreviewEngine { kWorkbench, kCycles };
+inline std::span<const std::string_view> Names(PreviewEngine) {
+  static constexpr std::string_view names[] = {"workbench", "cycles"};
+  return names;
+}
+
+struct BakeSettings {
+  int preview_width = 960;
+  int preview_height = 540;
+  PreviewEngine preview_engine = PreviewEngine::kWorkbench;
+  int preview_samples = 16;
+  int contact_sheet_columns = 4;
+
+  template <class Self, class F>
+  static void Visit(Self& s, F&& f) {
+    f(Param{.name = "preview_width", .unit = "px", .range = Range::Closed(16, 16384), .help = "rendered image width"},
+      s.preview_width);
+    f(Param{.name = "preview_height", .unit = "px", .range = Range::Closed(16, 16384), .help = "rendered image height"},
+      s.preview_height);
+    f(Param{.name = "preview_engine", .help = "Blender render engine"}, s.preview_engine);
+    f(Param{.name = "preview_samples", .range = Range::Closed(1, 65536),
+            .help = "Cycles samples per pixel (Workbench ignores it)"}, s.preview_samples);
+    f(Param{.name = "contact_sheet_columns", .range = Range::Closed(1, 64), .help = "frames per row of `contact_sheet.png`"},
+      s.contact_sheet_columns);
+  }
+};
+
+}  // namespace rime::io
