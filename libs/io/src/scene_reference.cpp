@@ -10,6 +10,9 @@
 
 namespace rime::io {
 
+namespace {
+
+// What a field accepts, in words: a range, or the names of an enum or a list.
 std::string DescribeAccepted(const Param& p, std::span<const std::string_view> names) {
   if (!names.empty()) {
     std::string out;
@@ -18,6 +21,57 @@ std::string DescribeAccepted(const Param& p, std::span<const std::string_view> n
   }
   return p.range.IsAny() ? std::string() : p.range.Describe();
 }
+
+template <class T>
+std::string DescribeAccepted(const Param& p, const T&) {
+  if constexpr (NamedEnum<T>) return DescribeAccepted(p, Names(T{}));
+  else if constexpr (std::is_same_v<T, std::vector<std::string>>) return DescribeAccepted(p, p.choices);
+  else if constexpr (std::is_same_v<T, bool> || std::is_same_v<T, std::string> || std::is_same_v<T, std::filesystem::path>) return "";
+  else return DescribeAccepted(p, std::span<const std::string_view>());
+}
+
+// The markdown table of one settings struct: key, unit, default, accepted values, meaning.
+template <class Settings>
+std::string MarkdownTable() {
+  std::string out = "| key | unit | default | accepted | meaning |\n|---|---|---|---|---|\n";
+  const Settings defaults{};
+  Settings::Visit(defaults, [&](const Param& p, const auto& value) {
+    const std::string meaning = p.doc.empty() ? std::string(p.help) : fmt::format("{} {}", p.help, p.doc);
+    out += fmt::format("| `{}` | {} | {} | {} | {} |\n", p.name, p.unit,
+                       p.default_doc.empty() ? FormatValue(value) : std::string(p.default_doc), DescribeAccepted(p, value),
+                       meaning);
+  });
+  return out;
+}
+
+constexpr std::string_view kFlagTableHeader =
+    "| flag | scene key | default | accepted | meaning |\n|---|---|---|---|---|\n";
+
+// Rows of a markdown table (kFlagTableHeader) of the command-line flags a settings struct declares.
+template <class Settings>
+std::string FlagRows() {
+  std::string out;
+  const Settings defaults{};
+  Settings::Visit(defaults, [&](const Param& p, const auto& value) {
+    if (p.flag.empty()) return;
+    std::string flags;  // "--remesh,!--no-remesh" -> `--remesh`, `--no-remesh`
+    for (std::size_t start = 0; start <= p.flag.size();) {
+      const std::size_t comma = std::min(p.flag.find(',', start), p.flag.size());
+      std::string_view name = p.flag.substr(start, comma - start);
+      if (!name.empty() && name.front() == '!') name.remove_prefix(1);
+      flags += fmt::format("{}`{}`", flags.empty() ? "" : ", ", name);
+      start = comma + 1;
+    }
+    // A default in words ("0 (= use the ratio)") stands without the unit.
+    const std::string shown = !p.default_doc.empty() ? std::string(p.default_doc)
+                              : p.unit.empty()        ? FormatValue(value)
+                                                      : fmt::format("{} {}", FormatValue(value), p.unit);
+    out += fmt::format("| {} | `{}` | {} | {} | {} |\n", flags, p.name, shown, DescribeAccepted(p, value), p.help);
+  });
+  return out;
+}
+
+}  // namespace
 
 std::vector<ReferenceTable> SceneReferenceTables() {
   const std::string scenes = "scene-reference.md", tools = "tools.md", header(kFlagTableHeader);

@@ -4,8 +4,8 @@
 /// Every settings struct of the scene keeps its defaults as member initialisers and lists each field
 /// once in a static `Visit(settings, f)`, calling `f(Param{...}, settings.field)`. The TOML loader
 /// (LoadSettings), the tools' override flags (tools/common/override_flags.h) and the tables of
-/// docs/scene-reference.md (MarkdownTable) are visitors over that one list, so adding a field
-/// touches one struct.
+/// docs/scene-reference.md and docs/tools.md (scene_reference.h) are visitors over that one list,
+/// so adding a field touches one struct.
 ///
 /// @code
 /// struct AirPressureSettings {
@@ -124,55 +124,6 @@ inline std::string FormatValue(const std::vector<std::string>& v) {
 template <NamedEnum E>
 std::string FormatValue(E v) {
   return fmt::format("\"{}\"", EnumName(v));
-}
-
-/// What a field accepts, in words: a range, or the names of an enum or a list.
-std::string DescribeAccepted(const Param& p, std::span<const std::string_view> names);
-template <class T>
-std::string DescribeAccepted(const Param& p, const T&) {
-  if constexpr (NamedEnum<T>) return DescribeAccepted(p, Names(T{}));
-  else if constexpr (std::is_same_v<T, std::vector<std::string>>) return DescribeAccepted(p, p.choices);
-  else if constexpr (std::is_same_v<T, bool> || std::is_same_v<T, std::string> || std::is_same_v<T, std::filesystem::path>) return "";
-  else return DescribeAccepted(p, std::span<const std::string_view>());
-}
-
-/// The markdown table of one settings struct: key, unit, default, accepted values, meaning.
-template <class Settings>
-std::string MarkdownTable(std::string_view key_prefix = {}) {
-  std::string out = "| key | unit | default | accepted | meaning |\n|---|---|---|---|---|\n";
-  const Settings defaults{};
-  Settings::Visit(defaults, [&](const Param& p, const auto& value) {
-    const std::string meaning = p.doc.empty() ? std::string(p.help) : fmt::format("{} {}", p.help, p.doc);
-    out += fmt::format("| `{}{}` | {} | {} | {} | {} |\n", key_prefix, p.name, p.unit,
-                       p.default_doc.empty() ? FormatValue(value) : std::string(p.default_doc), DescribeAccepted(p, value),
-                       meaning);
-  });
-  return out;
-}
-
-inline constexpr std::string_view kFlagTableHeader =
-    "| flag | scene key | default | accepted | meaning |\n|---|---|---|---|---|\n";
-
-/// Rows of a markdown table (kFlagTableHeader) of the command-line flags a settings struct declares.
-template <class Settings>
-std::string FlagRows() {
-  std::string out;
-  const Settings defaults{};
-  Settings::Visit(defaults, [&](const Param& p, const auto& value) {
-    if (p.flag.empty()) return;
-    std::string flags;  // "--remesh,!--no-remesh" -> `--remesh`, `--no-remesh`
-    for (std::size_t start = 0; start <= p.flag.size();) {
-      const std::size_t comma = std::min(p.flag.find(',', start), p.flag.size());
-      std::string_view name = p.flag.substr(start, comma - start);
-      if (!name.empty() && name.front() == '!') name.remove_prefix(1);
-      flags += fmt::format("{}`{}`", flags.empty() ? "" : ", ", name);
-      start = comma + 1;
-    }
-    const std::string shown = p.default_doc.empty() ? FormatValue(value) : std::string(p.default_doc);
-    out += fmt::format("| {} | `{}` | {}{}{} | {} | {} |\n", flags, p.name, shown, p.unit.empty() ? "" : " ", p.unit,
-                       DescribeAccepted(p, value), p.help);
-  });
-  return out;
 }
 
 }  // namespace rime::io
