@@ -3,7 +3,6 @@
 #include <fmt/format.h>
 
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 
 #include "rime/boundary/volumes.h"
@@ -21,24 +20,6 @@ RIME_SPH_KERNELS(RIME_INSTANTIATE_CPU_KERNEL)
 namespace rime::sph {
 
 namespace {
-
-class PhaseTimer {
- public:
-  PhaseTimer(const exec::Device& device, bool enabled, double& slot) : device_(device), enabled_(enabled), slot_(slot) {
-    if (enabled_) start_ = std::chrono::steady_clock::now();
-  }
-  ~PhaseTimer() {
-    if (!enabled_) return;
-    exec::Synchronize(device_);
-    slot_ += std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
-  }
-
- private:
-  const exec::Device& device_;
-  bool enabled_;
-  double& slot_;
-  std::chrono::steady_clock::time_point start_;
-};
 
 // The largest step the explicit non-pressure forces allow, and the scene parameter that sets it
 // (empty when nothing limits). The pressure solve is implicit and the wall viscosity is solved
