@@ -29,22 +29,13 @@ void Simulation<T>::NeighborSearch() {
 
   const CubicSpline<T> kernel(T(scene_.fluid.smoothing_length()));
   Neighborhoods<T>& p = s.pairs;
-  // w and ∇W of every pair, from the water (ff) and from the boundary (fb).
-  auto pair_values = [&](const neighbors::UniformGrid<T>& grid, bool same, const Vec3<T>* xj, neighbors::NeighborList& list,
-                         DeviceArray<T>& w, DeviceArray<Vec3<T>>& grad) {
-    {
-      PhaseTimer t(device_, timing_enabled_, same ? timings_.fluid_lists : timings_.boundary_lists);
-      grid.QueryGrid(s.fluid_grid, support, same, list);
-    }
-    PhaseTimer t(device_, timing_enabled_, timings_.pair_values);
-    w.resize(list.pairs());
-    grad.resize(list.pairs());
-    exec::ParallelFor(device_, n,
-                      kernels::PairValues<T>{.xi = s.fluid.x.data(), .xj = xj, .offsets = list.offsets.data(), .index = list.indices.data(),
-                                             .kernel = kernel, .w = w.data(), .grad = grad.data()});
-  };
-  pair_values(s.fluid_grid, true, s.fluid.x.data(), p.ff, p.ff_w, p.ff_grad);
-  pair_values(s.boundary_grid, false, s.boundary.x.data(), p.fb, p.fb_w, p.fb_grad);
+  // w and ∇W of every pair, from the water (ff) and from the boundary (fb), found with the lists.
+  {
+    PhaseTimer t(device_, timing_enabled_, timings_.fluid_lists);
+    s.fluid_grid.QueryGrid(s.fluid_grid, support, true, p.ff, {.kernel = kernel, .w = p.ff_w, .grad = p.ff_grad});
+  }
+  PhaseTimer t(device_, timing_enabled_, timings_.boundary_lists);
+  s.boundary_grid.QueryGrid(s.fluid_grid, support, false, p.fb, {.kernel = kernel, .w = p.fb_w, .grad = p.fb_grad});
 }
 
 template <class T>

@@ -10,6 +10,7 @@
 #include <cstdint>
 
 #include "rime/core/hd.h"
+#include "rime/core/kernel.h"
 #include "rime/core/math.h"
 #include "rime/exec/atomic.h"
 
@@ -282,6 +283,27 @@ struct FillNeighborsByCell {
   }
 };
 
+/// w and ∇W of every listed pair (i, j): r = xi[i] − xj[j].
+template <class T>
+struct PairValues {
+  const Vec3<T>* xi;
+  const Vec3<T>* xj;
+  const std::uint32_t* offsets;
+  const std::uint32_t* index;
+  CubicSpline<T> kernel;
+  T* w;
+  Vec3<T>* grad;
+  RIME_HD void operator()(Index i) const {
+    const Vec3<T> x = xi[i];
+    for (std::uint32_t k = offsets[i], e = offsets[i + 1]; k < e; ++k) {
+      const Vec3<T> r = x - xj[index[k]];
+      const T len = Norm(r);
+      w[k] = kernel.W(len);
+      grad[k] = r * kernel.GradientFactor(len);
+    }
+  }
+};
+
 /// Component-wise copy for bounding-box reductions: out[a*n + i] = -points[i][a] (a < 3) and
 /// points[i][a-3] (a >= 3), so one Max over each third gives -min and max.
 template <class T>
@@ -306,4 +328,5 @@ struct BoundsComponents {
   X(rime::neighbors::kernels::FillNeighbors<float>) X(rime::neighbors::kernels::FillNeighbors<double>)   \
   X(rime::neighbors::kernels::BoundsComponents<float>) X(rime::neighbors::kernels::BoundsComponents<double>)         \
   X(rime::neighbors::kernels::CountNeighborsByCell<float>) X(rime::neighbors::kernels::CountNeighborsByCell<double>) \
-  X(rime::neighbors::kernels::FillNeighborsByCell<float>) X(rime::neighbors::kernels::FillNeighborsByCell<double>)
+  X(rime::neighbors::kernels::FillNeighborsByCell<float>) X(rime::neighbors::kernels::FillNeighborsByCell<double>) \
+  X(rime::neighbors::kernels::PairValues<float>) X(rime::neighbors::kernels::PairValues<double>)
