@@ -78,8 +78,28 @@ struct CellCandidates {
   std::vector<std::uint32_t> match_j;  // kLanes longer than the candidates: whole blocks are stored
   std::vector<T> rx, ry, rz;
 
-  void Gather(const GridView<T>& target, const GridView<T>& source, std::uint32_t cell) {
-    const kernels::CellNeighborhood<T> hood(target, source, cell);
+  /// The 27 cells around a source cell, in the device kernels' order (CellNeighborhood's).
+  static kernels::CellNeighborhood<T> Hood(const GridView<T>& target, const typename UniformGrid<T>::DenseCells& dense,
+                                           const GridView<T>& source, std::uint32_t cell) {
+    if (dense.cells.empty()) return kernels::CellNeighborhood<T>(target, source, cell);
+    kernels::CellNeighborhood<T> hood;
+    const Vec3<T> p = source.points[source.sorted_index[source.cell_start[cell]]];
+    const std::int64_t cx = source.CellCoord(p.x, source.origin.x), cy = source.CellCoord(p.y, source.origin.y),
+                       cz = source.CellCoord(p.z, source.origin.z);
+    for (std::int64_t dz = -1; dz <= 1; ++dz)
+      for (std::int64_t dy = -1; dy <= 1; ++dy)
+        for (std::int64_t dx = -1; dx <= 1; ++dx) {
+          const std::uint32_t c = dense.At(cx + dx, cy + dy, cz + dz);
+          if (c == UniformGrid<T>::kNoCell) continue;
+          hood.begin[hood.count] = target.cell_start[c];
+          hood.end[hood.count] = target.cell_start[c + 1];
+          ++hood.count;
+        }
+    return hood;
+  }
+
+  void Gather(const GridView<T>& target, const typename UniformGrid<T>::DenseCells& dense, const GridView<T>& source, std::uint32_t cell) {
+    const kernels::CellNeighborhood<T> hood = Hood(target, dense, source, cell);
     count = 0;
     for (int k = 0; k < hood.count; ++k) count += hood.end[k] - hood.begin[k];
     padded = (count + kLanes - 1) / kLanes * kLanes;
@@ -211,6 +231,7 @@ void UniformGrid<T>::BuildImpl(const Vec3<T>* points, Index n, T cell_size, cons
   view_.count = static_cast<std::uint32_t>(n);
   view_.inv_cell = T(1) / cell_size;
   cells_ = 0;
+  dense_.cells.clear();
   if (n == 0) return;
 
   // Bounding box -> origin one cell below the minimum, so every point sits in a cell >= 1.
@@ -269,6 +290,33 @@ void UniformGrid<T>::BuildImpl(const Vec3<T>* points, Index n, T cell_size, cons
   view_.table_mask = table_size - 1;
   view_.cell_start = cell_start_.data();
   view_.sorted_index = sorted_index_.data();
+  if (!device_.is_cuda()) BuildDenseCells();
+}
+
+template <class T>
+void UniformGrid<T>::BuildDenseCells() {
+  const GridView<T>& v = view_;
+  const auto coords = [&](std::uint32_t cell, std::int64_t c[3]) {
+    const Vec3<T> p = v.points[v.sorted_index[v.cell_start[cell]]];
+    c[0] = v.CellCoord(p.x, v.origin.x), c[1] = v.CellCoord(p.y, v.origin.y), c[2] = v.CellCoord(p.z, v.origin.z);
+  };
+  std::int64_t lo[3], hi[3], c[3];
+  coords(0, lo);
+  coords(0, hi);
+  for (std::uint32_t cell = 1; cell < cells_; ++cell) {
+    coords(cell, c);
+    for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], c[a]), hi[a] = std::max(hi[a], c[a]);
+  }
+  // Dense only while the box costs at most a few words per point (sparse or far-flung clouds hash).
+  const double box = double(hi[0] - lo[0] + 1) * double(hi[1] - lo[1] + 1) * double(hi[2] - lo[2] + 1);
+  dense_.cells.clear();
+  if (box > 4.0 * double(view_.count) + 65536.0) return;
+  for (int a = 0; a < 3; ++a) dense_.lo[a] = lo[a], dense_.dims[a] = hi[a] - lo[a] + 1;
+  dense_.cells.assign(std::size_t(box), kNoCell);
+  for (std::uint32_t cell = 0; cell < cells_; ++cell) {
+    coords(cell, c);
+    dense_.cells[std::size_t(((c[2] - lo[2]) * dense_.dims[1] + (c[1] - lo[1])) * dense_.dims[0] + (c[0] - lo[0]))] = cell;
+  }
 }
 
 template <class T>
@@ -349,7 +397,7 @@ void UniformGrid<T>::CpuQueryByCell(const UniformGrid& queries, T radius, bool e
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, cells, 8), [&](const tbb::blocked_range<std::size_t>& range) {
     CellCandidates<T>& cand = scratch.local();
     for (std::size_t cell = range.begin(); cell != range.end(); ++cell) {
-      cand.Gather(target, source, std::uint32_t(cell));
+      cand.Gather(target, dense_, source, std::uint32_t(cell));
       for (std::uint32_t s = source.cell_start[cell], e = source.cell_start[cell + 1]; s < e; ++s) {
         const std::uint32_t i = source.sorted_index[s];
         counts[i] = std::uint32_t(cand.CountMatches(source.points[i], r2max, exclude_self ? i : ~0u));
@@ -370,7 +418,7 @@ void UniformGrid<T>::CpuQueryByCell(const UniformGrid& queries, T radius, bool e
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, cells, 8), [&](const tbb::blocked_range<std::size_t>& range) {
     CellCandidates<T>& cand = scratch.local();
     for (std::size_t cell = range.begin(); cell != range.end(); ++cell) {
-      cand.Gather(target, source, std::uint32_t(cell));
+      cand.Gather(target, dense_, source, std::uint32_t(cell));
       for (std::uint32_t s = source.cell_start[cell], e = source.cell_start[cell + 1]; s < e; ++s) {
         const std::uint32_t i = source.sorted_index[s];
         const std::uint32_t first = offsets[i];

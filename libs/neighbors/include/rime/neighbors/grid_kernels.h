@@ -214,6 +214,7 @@ template <class T>
 struct CellNeighborhood {
   std::uint32_t begin[27], end[27];
   int count = 0;
+  CellNeighborhood() = default;
   RIME_HDI CellNeighborhood(const GridView<T>& target, const GridView<T>& source, std::uint32_t cell) {
     const T size = T(1) / source.inv_cell;
     const Vec3<T> p = source.points[source.sorted_index[source.cell_start[cell]]];
