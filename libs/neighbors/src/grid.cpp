@@ -49,7 +49,6 @@ void CpuBounds(const Vec3<T>* points, Index n, Vec3<T>& lo, Vec3<T>& hi) {
   hi = box.finite ? box.hi : Vec3<T>(nan, nan, nan);
 }
 
-
 // The candidates of one query cell (the points of its up to 27 neighbor cells, in the order the
 // kernels visit them) as padded structure-of-arrays, and one query point's matches. Padding
 // points lie far away, so blocks of kLanes candidates need no tail handling.
@@ -78,28 +77,8 @@ struct CellCandidates {
   std::vector<std::uint32_t> match_j;  // kLanes longer than the candidates: whole blocks are stored
   std::vector<T> rx, ry, rz;
 
-  /// The 27 cells around a source cell, in the device kernels' order (CellNeighborhood's).
-  static kernels::CellNeighborhood<T> Hood(const GridView<T>& target, const typename UniformGrid<T>::DenseCells& dense,
-                                           const GridView<T>& source, std::uint32_t cell) {
-    if (dense.cells.empty()) return kernels::CellNeighborhood<T>(target, source, cell);
-    kernels::CellNeighborhood<T> hood;
-    const Vec3<T> p = source.points[source.sorted_index[source.cell_start[cell]]];
-    const std::int64_t cx = source.CellCoord(p.x, source.origin.x), cy = source.CellCoord(p.y, source.origin.y),
-                       cz = source.CellCoord(p.z, source.origin.z);
-    for (std::int64_t dz = -1; dz <= 1; ++dz)
-      for (std::int64_t dy = -1; dy <= 1; ++dy)
-        for (std::int64_t dx = -1; dx <= 1; ++dx) {
-          const std::uint32_t c = dense.At(cx + dx, cy + dy, cz + dz);
-          if (c == UniformGrid<T>::kNoCell) continue;
-          hood.begin[hood.count] = target.cell_start[c];
-          hood.end[hood.count] = target.cell_start[c + 1];
-          ++hood.count;
-        }
-    return hood;
-  }
-
-  void Gather(const GridView<T>& target, const typename UniformGrid<T>::DenseCells& dense, const GridView<T>& source, std::uint32_t cell) {
-    const kernels::CellNeighborhood<T> hood = Hood(target, dense, source, cell);
+  void Gather(const GridView<T>& target, const GridView<T>& source, std::uint32_t cell) {
+    const kernels::CellNeighborhood<T> hood(target, source, cell);
     count = 0;
     for (int k = 0; k < hood.count; ++k) count += hood.end[k] - hood.begin[k];
     padded = (count + kLanes - 1) / kLanes * kLanes;
@@ -120,10 +99,13 @@ struct CellCandidates {
     for (; c < padded; ++c) x[c] = y[c] = z[c] = far, j[c] = 0;
   }
 
-  /// Lists the candidates within sqrt(r2max) of q, except `self`, into match_j and (with
-  /// kOffsets) their offsets r = q − x_j into rx, ry, rz; returns how many. The squared distance
-  /// is the kernels' Dot(r, r) expression, so exactly the same pairs are found.
-  template <bool kOffsets>
+  /// What Match keeps of the candidates within range: their number only, their indices (into
+  /// match_j), or also their offsets r = q − x_j (into rx, ry, rz).
+  enum class Keep { kCount, kIndices, kOffsets };
+
+  /// The number of candidates within sqrt(r2max) of q, except `self`, keeping what `kKeep` says.
+  /// The squared distance is the kernels' Dot(r, r) expression, so exactly the same pairs are found.
+  template <Keep kKeep>
   std::size_t Match(const Vec3<T>& q, T r2max, std::uint32_t self) {
 #if defined(__AVX2__)
     if constexpr (std::is_same_v<T, float>) {
@@ -142,13 +124,15 @@ struct CellCandidates {
         const __m256i ids = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(&j[c]));
         const __m256 is_self = _mm256_castsi256_ps(_mm256_cmpeq_epi32(ids, self_id));
         const int mask = _mm256_movemask_ps(_mm256_andnot_ps(is_self, _mm256_cmp_ps(__m256(d2), limit, _CMP_LT_OQ)));
-        if (mask == 0) continue;
-        const __m256i pack = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(kLeftPack.lanes[mask]));
-        _mm256_storeu_si256(reinterpret_cast<__m256i*>(&match_j[k]), _mm256_permutevar8x32_epi32(ids, pack));
-        if constexpr (kOffsets) {
-          _mm256_storeu_ps(&rx[k], _mm256_permutevar8x32_ps(__m256(dx), pack));
-          _mm256_storeu_ps(&ry[k], _mm256_permutevar8x32_ps(__m256(dy), pack));
-          _mm256_storeu_ps(&rz[k], _mm256_permutevar8x32_ps(__m256(dz), pack));
+        if constexpr (kKeep != Keep::kCount) {
+          if (mask == 0) continue;
+          const __m256i pack = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(kLeftPack.lanes[mask]));
+          _mm256_storeu_si256(reinterpret_cast<__m256i*>(&match_j[k]), _mm256_permutevar8x32_epi32(ids, pack));
+          if constexpr (kKeep == Keep::kOffsets) {
+            _mm256_storeu_ps(&rx[k], _mm256_permutevar8x32_ps(__m256(dx), pack));
+            _mm256_storeu_ps(&ry[k], _mm256_permutevar8x32_ps(__m256(dy), pack));
+            _mm256_storeu_ps(&rz[k], _mm256_permutevar8x32_ps(__m256(dz), pack));
+          }
         }
         k += std::size_t(__builtin_popcount(unsigned(mask)));
       }
@@ -158,40 +142,9 @@ struct CellCandidates {
     std::size_t k = 0;
     for (std::size_t c = 0; c < count; ++c) {
       const Vec3<T> r(q.x - x[c], q.y - y[c], q.z - z[c]);
-      match_j[k] = j[c];
-      if constexpr (kOffsets) rx[k] = r.x, ry[k] = r.y, rz[k] = r.z;
+      if constexpr (kKeep != Keep::kCount) match_j[k] = j[c];
+      if constexpr (kKeep == Keep::kOffsets) rx[k] = r.x, ry[k] = r.y, rz[k] = r.z;
       k += (Dot(r, r) < r2max) & (j[c] != self);  // branch-free: store always, advance on a match
-    }
-    return k;
-  }
-
-  /// Only the number of matches (the counting pass).
-  std::size_t CountMatches(const Vec3<T>& q, T r2max, std::uint32_t self) {
-#if defined(__AVX2__)
-    if constexpr (std::is_same_v<T, float>) {
-      typedef float Block __attribute__((vector_size(32)));
-      const Block qx = q.x - Block{}, qy = q.y - Block{}, qz = q.z - Block{};
-      const __m256 limit = _mm256_set1_ps(r2max);
-      const __m256i self_id = _mm256_set1_epi32(int(self));
-      std::size_t k = 0;
-      for (std::size_t c = 0; c < padded; c += kLanes) {
-        Block bx, by, bz;
-        __builtin_memcpy(&bx, &x[c], sizeof bx);
-        __builtin_memcpy(&by, &y[c], sizeof by);
-        __builtin_memcpy(&bz, &z[c], sizeof bz);
-        const Block dx = qx - bx, dy = qy - by, dz = qz - bz;
-        const Block d2 = dx * dx + dy * dy + dz * dz;
-        const __m256i ids = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(&j[c]));
-        const __m256 is_self = _mm256_castsi256_ps(_mm256_cmpeq_epi32(ids, self_id));
-        k += std::size_t(__builtin_popcount(unsigned(_mm256_movemask_ps(_mm256_andnot_ps(is_self, _mm256_cmp_ps(__m256(d2), limit, _CMP_LT_OQ))))));
-      }
-      return k;
-    }
-#endif
-    std::size_t k = 0;
-    for (std::size_t c = 0; c < count; ++c) {
-      const Vec3<T> r(q.x - x[c], q.y - y[c], q.z - z[c]);
-      k += (Dot(r, r) < r2max) & (j[c] != self);
     }
     return k;
   }
@@ -231,7 +184,7 @@ void UniformGrid<T>::BuildImpl(const Vec3<T>* points, Index n, T cell_size, cons
   view_.count = static_cast<std::uint32_t>(n);
   view_.inv_cell = T(1) / cell_size;
   cells_ = 0;
-  dense_.cells.clear();
+  dense_cells_.clear();
   if (n == 0) return;
 
   // Bounding box -> origin one cell below the minimum, so every point sits in a cell >= 1.
@@ -295,7 +248,7 @@ void UniformGrid<T>::BuildImpl(const Vec3<T>* points, Index n, T cell_size, cons
 
 template <class T>
 void UniformGrid<T>::BuildDenseCells() {
-  const GridView<T>& v = view_;
+  GridView<T>& v = view_;
   const auto coords = [&](std::uint32_t cell, std::int64_t c[3]) {
     const Vec3<T> p = v.points[v.sorted_index[v.cell_start[cell]]];
     c[0] = v.CellCoord(p.x, v.origin.x), c[1] = v.CellCoord(p.y, v.origin.y), c[2] = v.CellCoord(p.z, v.origin.z);
@@ -309,14 +262,14 @@ void UniformGrid<T>::BuildDenseCells() {
   }
   // Dense only while the box costs at most a few words per point (sparse or far-flung clouds hash).
   const double box = double(hi[0] - lo[0] + 1) * double(hi[1] - lo[1] + 1) * double(hi[2] - lo[2] + 1);
-  dense_.cells.clear();
-  if (box > 4.0 * double(view_.count) + 65536.0) return;
-  for (int a = 0; a < 3; ++a) dense_.lo[a] = lo[a], dense_.dims[a] = hi[a] - lo[a] + 1;
-  dense_.cells.assign(std::size_t(box), kNoCell);
+  if (box > 4.0 * double(v.count) + 65536.0) return;
+  for (int a = 0; a < 3; ++a) v.dense_lo[a] = lo[a], v.dense_dims[a] = hi[a] - lo[a] + 1;
+  dense_cells_.assign(std::size_t(box), GridView<T>::kNoCell);
   for (std::uint32_t cell = 0; cell < cells_; ++cell) {
     coords(cell, c);
-    dense_.cells[std::size_t(((c[2] - lo[2]) * dense_.dims[1] + (c[1] - lo[1])) * dense_.dims[0] + (c[0] - lo[0]))] = cell;
+    dense_cells_[std::size_t(((c[2] - lo[2]) * v.dense_dims[1] + (c[1] - lo[1])) * v.dense_dims[0] + (c[0] - lo[0]))] = cell;
   }
+  v.dense_cells = dense_cells_.data();
 }
 
 template <class T>
@@ -390,6 +343,7 @@ void UniformGrid<T>::CpuQueryByCell(const UniformGrid& queries, T radius, bool e
   const T r2max = radius * radius;
   const std::size_t cells = queries.cell_count();
   static tbb::enumerable_thread_specific<CellCandidates<T>> scratch;
+  using Keep = typename CellCandidates<T>::Keep;
   out.offsets.resize(m + 1);
   counts_.resize(m + 1);
   counts_.SetZero();
@@ -397,10 +351,10 @@ void UniformGrid<T>::CpuQueryByCell(const UniformGrid& queries, T radius, bool e
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, cells, 8), [&](const tbb::blocked_range<std::size_t>& range) {
     CellCandidates<T>& cand = scratch.local();
     for (std::size_t cell = range.begin(); cell != range.end(); ++cell) {
-      cand.Gather(target, dense_, source, std::uint32_t(cell));
+      cand.Gather(target, source, std::uint32_t(cell));
       for (std::uint32_t s = source.cell_start[cell], e = source.cell_start[cell + 1]; s < e; ++s) {
         const std::uint32_t i = source.sorted_index[s];
-        counts[i] = std::uint32_t(cand.CountMatches(source.points[i], r2max, exclude_self ? i : ~0u));
+        counts[i] = std::uint32_t(cand.template Match<Keep::kCount>(source.points[i], r2max, exclude_self ? i : ~0u));
       }
     }
   });
@@ -418,12 +372,13 @@ void UniformGrid<T>::CpuQueryByCell(const UniformGrid& queries, T radius, bool e
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, cells, 8), [&](const tbb::blocked_range<std::size_t>& range) {
     CellCandidates<T>& cand = scratch.local();
     for (std::size_t cell = range.begin(); cell != range.end(); ++cell) {
-      cand.Gather(target, dense_, source, std::uint32_t(cell));
+      cand.Gather(target, source, std::uint32_t(cell));
       for (std::uint32_t s = source.cell_start[cell], e = source.cell_start[cell + 1]; s < e; ++s) {
         const std::uint32_t i = source.sorted_index[s];
         const std::uint32_t first = offsets[i];
-        const std::size_t found = values ? cand.template Match<true>(source.points[i], r2max, exclude_self ? i : ~0u)
-                                         : cand.template Match<false>(source.points[i], r2max, exclude_self ? i : ~0u);
+        const std::uint32_t self = exclude_self ? i : ~0u;
+        const std::size_t found = values ? cand.template Match<Keep::kOffsets>(source.points[i], r2max, self)
+                                         : cand.template Match<Keep::kIndices>(source.points[i], r2max, self);
         std::copy_n(cand.match_j.data(), found, indices + first);
         if (!values) continue;
         // The expressions of kernels::PairValues, so the values are the same bits.

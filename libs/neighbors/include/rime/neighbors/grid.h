@@ -79,25 +79,6 @@ class UniformGrid {
   void CpuQueryByCell(const UniformGrid& queries, T radius, bool exclude_self, NeighborList& out, const PairKernelArrays<T>* values) const;
   void BuildDenseCells();
 
- public:
-  /// CPU only: the occupied cells' indices in a dense box of cells (kNoCell where empty), when the
-  /// box is small against the point count; lookups then read neighbouring memory instead of
-  /// probing the hash table. Empty when not built.
-  static constexpr std::uint32_t kNoCell = ~0u;
-  struct DenseCells {
-    std::vector<std::uint32_t> cells;
-    std::int64_t lo[3] = {0, 0, 0}, dims[3] = {0, 0, 0};
-    /// The cell at lattice coordinates (x, y, z), kNoCell when empty or outside the box.
-    std::uint32_t At(std::int64_t x, std::int64_t y, std::int64_t z) const {
-      x -= lo[0], y -= lo[1], z -= lo[2];
-      if (x < 0 || y < 0 || z < 0 || x >= dims[0] || y >= dims[1] || z >= dims[2]) return kNoCell;
-      return cells[std::size_t((z * dims[1] + y) * dims[0] + x)];
-    }
-  };
-
- private:
-  DenseCells dense_;
-
   exec::Device device_;
   T cell_size_ = 0;
   std::size_t cells_ = 0;
@@ -111,6 +92,7 @@ class UniformGrid {
   exec::DeviceArray<std::uint32_t> table_cells_;
   exec::DeviceArray<T> bounds_scratch_;
   mutable exec::DeviceArray<std::uint32_t> counts_;
+  std::vector<std::uint32_t> dense_cells_;  // CPU: GridView::dense_cells
 };
 
 extern template class UniformGrid<float>;
