@@ -347,16 +347,22 @@ void UniformGrid<T>::CpuQueryByCell(const UniformGrid& queries, T radius, bool e
   out.offsets.resize(m + 1);
   counts_.resize(m + 1);
   counts_.SetZero();
-  std::uint32_t* counts = counts_.data();
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, cells, 8), [&](const tbb::blocked_range<std::size_t>& range) {
-    CellCandidates<T>& cand = scratch.local();
-    for (std::size_t cell = range.begin(); cell != range.end(); ++cell) {
-      cand.Gather(target, source, std::uint32_t(cell));
-      for (std::uint32_t s = source.cell_start[cell], e = source.cell_start[cell + 1]; s < e; ++s) {
-        const std::uint32_t i = source.sorted_index[s];
-        counts[i] = std::uint32_t(cand.template Match<Keep::kCount>(source.points[i], r2max, exclude_self ? i : ~0u));
+  // visit(candidates, i, self) for every query point i, its cell's candidates gathered.
+  const auto for_each_query = [&](auto&& visit) {
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, cells, 8), [&](const tbb::blocked_range<std::size_t>& range) {
+      CellCandidates<T>& cand = scratch.local();
+      for (std::size_t cell = range.begin(); cell != range.end(); ++cell) {
+        cand.Gather(target, source, std::uint32_t(cell));
+        for (std::uint32_t s = source.cell_start[cell], e = source.cell_start[cell + 1]; s < e; ++s) {
+          const std::uint32_t i = source.sorted_index[s];
+          visit(cand, i, exclude_self ? i : ~0u);
+        }
       }
-    }
+    });
+  };
+  std::uint32_t* counts = counts_.data();
+  for_each_query([&](CellCandidates<T>& cand, std::uint32_t i, std::uint32_t self) {
+    counts[i] = std::uint32_t(cand.template Match<Keep::kCount>(source.points[i], r2max, self));
   });
   const std::uint64_t total = exec::ExclusiveScan(device_, counts_.data(), out.offsets.data(), m + 1);
   if (total > 0xffffffffULL) throw Error(ExitCode::kFailure, "neighbor grid: more than 2^32 neighbor pairs");
@@ -369,27 +375,19 @@ void UniformGrid<T>::CpuQueryByCell(const UniformGrid& queries, T radius, bool e
   std::uint32_t* indices = out.indices.data();
   T* w = values ? values->w.data() : nullptr;
   Vec3<T>* grad = values ? values->grad.data() : nullptr;
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, cells, 8), [&](const tbb::blocked_range<std::size_t>& range) {
-    CellCandidates<T>& cand = scratch.local();
-    for (std::size_t cell = range.begin(); cell != range.end(); ++cell) {
-      cand.Gather(target, source, std::uint32_t(cell));
-      for (std::uint32_t s = source.cell_start[cell], e = source.cell_start[cell + 1]; s < e; ++s) {
-        const std::uint32_t i = source.sorted_index[s];
-        const std::uint32_t first = offsets[i];
-        const std::uint32_t self = exclude_self ? i : ~0u;
-        const std::size_t found = values ? cand.template Match<Keep::kOffsets>(source.points[i], r2max, self)
-                                         : cand.template Match<Keep::kIndices>(source.points[i], r2max, self);
-        std::copy_n(cand.match_j.data(), found, indices + first);
-        if (!values) continue;
-        // The expressions of kernels::PairValues, so the values are the same bits.
-        const CubicSpline<T> kernel = values->kernel;
-        for (std::size_t k = 0; k < found; ++k) {
-          const Vec3<T> r(cand.rx[k], cand.ry[k], cand.rz[k]);
-          const T len = Norm(r);
-          w[first + k] = kernel.W(len);
-          grad[first + k] = r * kernel.GradientFactor(len);
-        }
-      }
+  for_each_query([&](CellCandidates<T>& cand, std::uint32_t i, std::uint32_t self) {
+    const std::uint32_t first = offsets[i];
+    const std::size_t found = values ? cand.template Match<Keep::kOffsets>(source.points[i], r2max, self)
+                                     : cand.template Match<Keep::kIndices>(source.points[i], r2max, self);
+    std::copy_n(cand.match_j.data(), found, indices + first);
+    if (!values) return;
+    // The expressions of kernels::PairValues, so the values are the same bits.
+    const CubicSpline<T> kernel = values->kernel;
+    for (std::size_t k = 0; k < found; ++k) {
+      const Vec3<T> r(cand.rx[k], cand.ry[k], cand.rz[k]);
+      const T len = Norm(r);
+      w[first + k] = kernel.W(len);
+      grad[first + k] = r * kernel.GradientFactor(len);
     }
   });
 }
