@@ -110,7 +110,8 @@ Index FreezeStep(const exec::Device& device, const io::Scene& scene, const Parti
   const CubicSpline<T> kernel(p.h);
   const T support = kernel.SupportRadius();
 
-  // Per-boundary caches of the diffusion: new rows (new ice) start untouched and stale.
+  // Per-boundary caches of the diffusion; new rows (new ice) start at zero, and the solver flags
+  // them and the volumes they changed in structure_touched.
   for (auto* a : {&work.wet_seen, &work.stale, &work.film_touched, &work.structure_touched, &work.region}) a->resize(nb);
   work.laplacian.resize(nb);
   work.lambda.resize(nb);
