@@ -20,6 +20,8 @@ BakeSettings ParseBakeTable(io::TomlReader t) {
   b.preview_engine = t.String("preview_engine", b.preview_engine, {"workbench", "cycles"});
   b.preview_samples = static_cast<int>(t.Integer("preview_samples", b.preview_samples, io::Range::Closed(1, 65536)));
   b.contact_sheet_columns = static_cast<int>(t.Integer("contact_sheet_columns", b.contact_sheet_columns, io::Range::Closed(1, 64)));
+  b.preview_view = t.Vector("preview_view", b.preview_view, io::Range::Closed(-1e6, 1e6));
+  if (!(Norm(b.preview_view) > 0)) t.Fail("preview_view", "must not be the zero vector");
   t.RejectUnknownKeys();
   return b;
 }

@@ -19,6 +19,7 @@ struct BakeSettings {
   std::string preview_engine = "workbench";  // "workbench" | "cycles"
   int preview_samples = 16;            // Cycles samples per pixel (Workbench ignores it)
   int contact_sheet_columns = 4;       // frames per row of the contact sheet
+  Vec3d preview_view{1.0, -1.4, 0.8};  // direction from the scene's centre to the camera
 };
 
 class SceneDocument {
