@@ -167,7 +167,7 @@ struct Runner::Impl {
         // A tool that could not write its output (disk full, file too large, permissions), or
         // that refused to start above its memory budget, passes its code on: both are about the
         // machine, not the scene.
-        const bool passed_on = code == static_cast<int>(ExitCode::kIo) || code == static_cast<int>(kExitOverBudget);
+        const bool passed_on = code == static_cast<int>(ExitCode::kIo) || code == static_cast<int>(ExitCode::kOverBudget);
         Fail(job, passed_on ? code : kExitStageFailed,
              fmt::format("stage {} failed{} ({} exited with code {}{}); log: {}", StageName(job.stage), FrameSuffix(job), job.tool_name, code,
                          last.empty() ? "" : ": " + last, job.log.string()));

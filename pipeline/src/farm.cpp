@@ -421,6 +421,9 @@ int FarmSubmit(const FarmContext& farm, bool resubmit, json& summary) {
     args.insert(args.end(), task.begin(), task.end());
     if (!sim_job.empty()) args.insert(args.end(), {"--farm-sim-job", sim_job});
     if (farm.force) args.push_back("--force");
+    // The limits given at submission hold on the node too: the task passes them to its tools.
+    if (farm.graph.memory_budget > 0) args.insert(args.end(), {"--memory-budget", std::to_string(farm.graph.memory_budget)});
+    if (!farm.graph.sandbox.empty()) args.insert(args.end(), {"--sandbox", farm.graph.sandbox.string()});
 
     if (farm.dry_run) {
       std::printf("%s\n", CommandLine(sbatch, args).c_str());

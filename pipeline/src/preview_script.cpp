@@ -103,7 +103,7 @@ center, radius = (lo + hi) / 2, max((hi - lo).length / 2, 1e-3)
 camera_data = bpy.data.cameras.new("camera")
 camera = bpy.data.objects.new("camera", camera_data)
 scene.collection.objects.link(camera)
-direction = Vector((1.0, -1.4, 0.8)).normalized()
+direction = Vector(setup["view"]).normalized()
 camera.location = center + direction * (1.15 * radius / math.sin(camera_data.angle / 2))
 camera.rotation_euler = (-direction).to_track_quat("-Z", "Y").to_euler()
 camera_data.clip_end = 100 * radius
@@ -192,7 +192,8 @@ void WritePreviewFiles(const SceneDocument& doc, const BakeLayout& layout) {
   }
   const BakeSettings& b = doc.bake();
   const json setup = {{"solids", solids},         {"bounds", SceneBounds(scene)}, {"width", b.preview_width},
-                      {"height", b.preview_height}, {"engine", std::string(io::EnumName(b.preview_engine))}, {"samples", b.preview_samples}};
+                      {"height", b.preview_height}, {"engine", std::string(io::EnumName(b.preview_engine))}, {"samples", b.preview_samples},
+                      {"view", ToArray(b.preview_view)}};
   const fs::path folder = layout.cache() / "preview";
   fs::create_directories(folder);
   WriteIfChanged(folder / "render_preview.py", std::string(kRenderScript).substr(1));

@@ -16,6 +16,7 @@ namespace {
 BakeSettings ParseBakeTable(io::TomlReader t) {
   BakeSettings b;
   io::LoadSettings(t, b);
+  if (!(Norm(b.preview_view) > 0)) t.Fail("preview_view", "must not be the zero vector");
   t.RejectUnknownKeys();
   return b;
 }

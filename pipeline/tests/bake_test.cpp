@@ -384,6 +384,11 @@ TEST_F(Bake, PreviewRendersEveryCleanedFrameWhenBlenderIsOnPath) {
   WriteFile(scene_, ReadFile(scene_) + "[bake]\npreview_width = 640\n");  // only the preview reads [bake]
   ASSERT_EQ(RunBake(), 0) << output_;
   EXPECT_EQ(Invocations(), (Counts{{"blender", kLastFrame + 1}, {"ffmpeg", 2}})) << output_;
+  // The camera's direction reaches the render script's setup and rerenders every frame.
+  WriteFile(scene_, ReadFile(scene_) + "preview_view = [1.0, -1.0, 0.25]\n");
+  ASSERT_EQ(RunBake(), 0) << output_;
+  EXPECT_EQ(Invocations()["blender"], kLastFrame + 1) << output_;
+  EXPECT_NE(ReadFile(Out() / "cache/preview/preview_scene.json").find("0.25"), std::string::npos);
 }
 
 // RIME_BLENDER names a Blender outside PATH; "none" skips the preview stage.
@@ -672,6 +677,12 @@ TEST_F(Bake, BadBakeTableNamesFileLineAndField) {
   const auto line = std::count(text.begin(), text.end(), '\n');  // the misspelled key is on the last line
   EXPECT_EQ(RunBake(), 3) << output_;
   EXPECT_NE(output_.find(fmt::format("scene.toml:{}: bake.preview_widht", line)), std::string::npos) << output_;
+}
+
+TEST_F(Bake, ZeroPreviewViewIsRefusedNamingTheField) {
+  WriteFile(scene_, ReadFile(scene_) + "[bake]\npreview_view = [0, 0, 0]\n");
+  EXPECT_EQ(RunBake(), 3) << output_;
+  EXPECT_NE(output_.find("bake.preview_view"), std::string::npos) << output_;
 }
 
 }  // namespace

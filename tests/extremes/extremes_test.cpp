@@ -413,6 +413,17 @@ TEST(ExtremesViscosity, StickinessBeyondTheMinimumStepIsRefusedNamingIt) {
   }
 }
 
+// p_atm ten times the paper's at d_p = 1 cm pushes a free-surface particle at ~5000 m/s²: the step
+// must follow that push, not only the flow's speed, or a surface particle jumps a spacing per step.
+TEST(ExtremesAirPressure, TenTimesThePapersIsStable) {
+  io::Scene base;
+  base.modules = {"gravity", "viscosity", "air_pressure"};
+  base.air_pressure.p_atm = 50000;
+  const DamRun r = RunDam(Dam{0.01}, base, 0.2);
+  std::printf("air pressure 50 kPa: %s\n", Describe(r.s).c_str());
+  ExpectStableDam(r, false);  // the push does work on the surface
+}
+
 TEST(ExtremesSurfaceTension, ZeroIsStable) {
   const DamRun r = RunDam(Dam{0.02}, WithSurfaceTension(0), 0.5);
   std::printf("surface tension 0: %s\n", Describe(r.s).c_str());

@@ -198,6 +198,18 @@ TEST_F(Farm, DryRunShowsTheJobChainAndSettingsAreValidated) {
   EXPECT_NE(output_.find("--time=10"), std::string::npos) << output_;
   EXPECT_NE(output_.find("--farm-task surface"), std::string::npos) << output_;
   EXPECT_FALSE(fs::exists(root_ / "out/cache/.rime-bake/farm-jobs.json"));
+  EXPECT_EQ(output_.find("--memory-budget"), std::string::npos) << output_;
+
+  // A memory budget and a sandbox given at submission reach every task's command line.
+  ASSERT_EQ(RunBake("fake.toml", root_ / "out", "cleanup --farm slurm --dry-run --memory-budget 2G --sandbox '" + root_.string() + "'", true), 0)
+      << output_;
+  for (const char* group : {"boundary", "sim", "surface", "cleanup"}) {
+    const auto at = output_.find(fmt::format("--farm-task {} ", group));
+    ASSERT_NE(at, std::string::npos) << group << "\n" << output_;
+    const std::string line = output_.substr(at, output_.find('\n', at) - at);
+    EXPECT_NE(line.find("--memory-budget 2147483648"), std::string::npos) << line;
+    EXPECT_NE(line.find("--sandbox " + root_.string()), std::string::npos) << line;
+  }
 
   // The simulation asks for a GPU only where the site has them and the device allows it.
   std::ofstream(root_ / "gpu_site.toml") << "[farm]\ngpus = true\nsim_partition = \"gpu\"\ncpus_per_task = 3\n";

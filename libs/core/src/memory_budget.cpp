@@ -150,7 +150,7 @@ void CheckMemoryBudget(const MemoryBudget& budget, double estimate_bytes, std::s
   // The libraries, the inputs read so far and the heap already held stay for the whole run.
   const double peak = double(ResidentBytes()) + estimate_bytes;
   if (!(peak > double(budget.bytes))) return;
-  throw Error(kExitOverBudget, fmt::format("needs about {} for {} ({}), budget {} ({})", FormatBytes(peak), driver, context,
+  throw Error(ExitCode::kOverBudget, fmt::format("needs about {} for {} ({}), budget {} ({})", FormatBytes(peak), driver, context,
                                            FormatBytes(double(budget.bytes)), budget.source));
 }
 

@@ -61,7 +61,7 @@ TEST(MemoryBudget, RefusalIsOneLineWithEstimateBudgetAndInput) {
     CheckMemoryBudget(budget, 14.2 * (1ull << 30), "310 M voxels", "frame particles.0012.h5part, voxel 2 mm");
     FAIL() << "not refused";
   } catch (const Error& e) {
-    EXPECT_EQ(e.code(), kExitOverBudget);
+    EXPECT_EQ(e.code(), ExitCode::kOverBudget);
     EXPECT_STREQ(e.what(),
                  "needs about 14.2 GiB for 310 M voxels (frame particles.0012.h5part, voxel 2 mm), budget 8 GiB (--memory-budget)");
   }

@@ -41,6 +41,66 @@ FreezeParams<T> MakeFreezeParams(const io::Scene& scene) {
   return p;
 }
 
+namespace {
+
+// The film diffusion's region (spec §9.3: the wet particles and their one-ring) in
+// work.region_list; returns its size. With valid caches only what changed since the last call is
+// looked at: the particles that became wet grow it, the boundary changed by new ice joins it, and
+// a particle that dried rebuilds it (it may shrink).
+template <class T>
+Index UpdateDiffusionRegion(const exec::Device& device, const Particles<T>& particles, T support, FreezingBoundary<T>& film,
+                            FreezingWork<T>& work, DeviceArray<std::uint32_t>& slot) {
+  const Index nb = particles.nb;
+  const neighbors::GridView<T> grid = particles.boundary_grid->view();
+  work.wet.resize(nb);
+  exec::ParallelFor(device, nb, kernels::MarkWet<T>{.film = film.film.data(), .wet = work.wet.data()});
+  work.newly_wet.resize(nb);
+  work.dried.resize(nb);
+  exec::ParallelFor(device, nb, kernels::WetChanges{.wet = work.wet.data(), .wet_seen = work.wet_seen.data(), .newly_wet = work.newly_wet.data(),
+                                                    .dried = work.dried.data()});
+  const bool rebuild = !work.diffusion_cache_valid || particles.boundary_moves ||
+                       exec::ListFlagged(device, work.dried, nb, slot, work.change_list) > 0;
+  if (rebuild) {
+    work.region.SetZero();
+    exec::ParallelFor(device, nb, kernels::DilateWet<T>{.grid = grid, .wet = work.wet.data(), .radius = support, .region = work.region.data()});
+    exec::FillValue(device, work.stale, 0, 1u);  // every Laplacian is evaluated anew
+    work.film_touched.SetZero();
+    work.structure_touched.SetZero();
+    work.diffusion_cache_valid = !particles.boundary_moves;
+  } else {
+    const Index grown = exec::ListFlagged(device, work.newly_wet, nb, slot, work.change_list);
+    exec::ParallelFor(device, grown, kernels::GrowRegion<T>{.grid = grid, .list = work.change_list.data(), .radius = support,
+                                                            .region = work.region.data(), .stale = work.stale.data()});
+    const Index changed = exec::ListFlagged(device, work.structure_touched, nb, slot, work.change_list);
+    exec::ParallelFor(device, changed, kernels::JoinRegion<T>{.grid = grid, .list = work.change_list.data(), .wet = work.wet.data(),
+                                                              .radius = support, .region = work.region.data(), .stale = work.stale.data()});
+  }
+  return exec::ListFlagged(device, work.region, nb, slot, work.region_list);
+}
+
+// The region particles whose Laplacian (and stability bound) must be evaluated before the next
+// diffusion step, in work.change_list; returns how many. A Laplacian depends on the films,
+// volumes and positions within its support, so those around a changed film or a changed
+// boundary particle are evaluated, and those that entered the region; the others keep theirs.
+template <class T>
+Index EvaluationList(const exec::Device& device, const Particles<T>& particles, T support, FreezingWork<T>& work,
+                     DeviceArray<std::uint32_t>& slot) {
+  const Index nb = particles.nb;
+  const neighbors::GridView<T> grid = particles.boundary_grid->view();
+  work.evaluate.resize(nb);
+  work.evaluate.SetZero();
+  for (DeviceArray<std::uint32_t>* changed : {&work.film_touched, &work.structure_touched}) {
+    const Index count = exec::ListFlagged(device, *changed, nb, slot, work.change_list);
+    exec::ParallelFor(device, count, kernels::MarkAffected<T>{.grid = grid, .list = work.change_list.data(), .region = work.region.data(),
+                                                              .radius = support, .evaluate = work.evaluate.data()});
+    changed->SetZero();
+  }
+  exec::ParallelFor(device, nb, kernels::AddStale{.region = work.region.data(), .stale = work.stale.data(), .evaluate = work.evaluate.data()});
+  return exec::ListFlagged(device, work.evaluate, nb, slot, work.change_list);
+}
+
+}  // namespace
+
 template <class T>
 Index FreezeStep(const exec::Device& device, const io::Scene& scene, const Particles<T>& particles, double dt, double& diffusion_pending,
                  FreezingBoundary<T>& film, FreezingFluid<T>* clocks, FreezingWork<T>& work, DeviceArray<std::uint32_t>& keep,
@@ -49,6 +109,12 @@ Index FreezeStep(const exec::Device& device, const io::Scene& scene, const Parti
   const FreezeParams<T> p = MakeFreezeParams<T>(scene);
   const CubicSpline<T> kernel(p.h);
   const T support = kernel.SupportRadius();
+
+  // Per-boundary caches of the diffusion; new rows (new ice) start at zero, and the solver flags
+  // them and the volumes they changed in structure_touched.
+  for (auto* a : {&work.wet_seen, &work.stale, &work.film_touched, &work.structure_touched, &work.region}) a->resize(nb);
+  work.laplacian.resize(nb);
+  work.lambda.resize(nb);
 
   // Who touches whom: fluid with boundary neighbors, and boundary particles with fluid neighbors
   // (their B–F lists at the new positions, spec §11 step 8).
@@ -78,9 +144,11 @@ Index FreezeStep(const exec::Device& device, const io::Scene& scene, const Parti
                                          .boundary_x = particles.boundary_x, .boundary_volume = particles.boundary_volume,
                                          .boundary_phase = particles.boundary_phase, .x = particles.x, .v = particles.v,
                                          .d = work.fluid_d.data(), .kernel = kernel, .params = p, .dt = T(dt), .film = film.film.data(),
-                                         .growth = film.growth.data(), .growth_valid = film.growth_valid.data()});
+                                         .growth = film.growth.data(), .growth_valid = film.growth_valid.data(),
+                                         .film_touched = work.film_touched.data()});
   if (scene.freezing.drying_rate > 0)
-    exec::ParallelFor(device, nb, kernels::DryFilm<T>{.factor = T(std::exp(-scene.freezing.drying_rate * dt)), .film = film.film.data()});
+    exec::ParallelFor(device, nb, kernels::DryFilm<T>{.factor = T(std::exp(-scene.freezing.drying_rate * dt)), .film = film.film.data(),
+                                                      .film_touched = work.film_touched.data()});
 
   // 8c film diffusion over the wet region and its one-ring. Operator splitting: the diffusion
   // time accumulates until one explicit step of it would use half the stability budget (the
@@ -92,29 +160,29 @@ Index FreezeStep(const exec::Device& device, const io::Scene& scene, const Parti
   if (diffusivity > 0 && diffusion_pending * diffusivity * 5.0 / (h * h) >= 0.5) {
     const double dt_diffusion = diffusion_pending;
     diffusion_pending = 0;
-    work.wet.resize(nb);
-    work.region.resize(nb);
-    work.region.SetZero();
-    exec::ParallelFor(device, nb, kernels::MarkWet<T>{.film = film.film.data(), .wet = work.wet.data()});
-    exec::ParallelFor(device, nb,
-                      kernels::DilateWet<T>{.grid = particles.boundary_grid->view(), .wet = work.wet.data(), .radius = support,
-                                            .region = work.region.data()});
-    const Index region = exec::ListFlagged(device, work.region, nb, slot, work.region_list);
+    const Index region = UpdateDiffusionRegion(device, particles, support, film, work, slot);
     if (region > 0) {
-      work.laplacian.resize(region);
-      work.lambda.resize(region);
-      const kernels::FilmLaplacian<T> laplacian{.list = work.region_list.data(), .grid = particles.boundary_grid->view(),
-                                                .volume = particles.boundary_volume,
-                                           .film = film.film.data(), .kernel = kernel, .epsilon = T(particles.viscosity_epsilon),
-                                           .laplacian = work.laplacian.data(), .lambda = work.lambda.data()};
-      exec::ParallelFor(device, region, laplacian);
-      const double lambda_max = exec::Max(device, work.lambda.data(), region);
+      // Laplacians where they may have changed (the list is rebuilt first: it may move in memory).
+      const auto evaluate = [&] {
+        const Index count = EvaluationList(device, particles, support, work, slot);
+        exec::ParallelFor(device, count,
+                          kernels::FilmLaplacian<T>{.list = work.change_list.data(), .grid = particles.boundary_grid->view(),
+                                                    .volume = particles.boundary_volume, .film = film.film.data(), .kernel = kernel,
+                                                    .epsilon = T(particles.viscosity_epsilon), .laplacian = work.laplacian.data(),
+                                                    .lambda = work.lambda.data()});
+      };
+      evaluate();
+      work.region_lambda.resize(region);
+      exec::ParallelFor(device, region,
+                        kernels::GatherListed<T>{.list = work.region_list.data(), .values = work.lambda.data(), .out = work.region_lambda.data()});
+      const double lambda_max = exec::Max(device, work.region_lambda.data(), region);
       const int substeps = std::max(1, int(std::ceil(dt_diffusion * diffusivity * lambda_max)));
       for (int sub = 0; sub < substeps; ++sub) {
-        if (sub > 0) exec::ParallelFor(device, region, laplacian);
+        if (sub > 0) evaluate();
         exec::ParallelFor(device, region,
                           kernels::ApplyFilmDiffusion<T>{.list = work.region_list.data(), .laplacian = work.laplacian.data(),
-                                                    .step = T(dt_diffusion * diffusivity / substeps), .film = film.film.data()});
+                                                         .step = T(dt_diffusion * diffusivity / substeps), .film = film.film.data(),
+                                                         .film_touched = work.film_touched.data()});
       }
     }
   }

@@ -47,6 +47,7 @@ TEST(FreezeKernels, FilmDiffusionConservesAndKeepsBounds) {
   }
   DeviceArray<Vec3d> dx(cpu, x);
   DeviceArray<double> dfilm(cpu, film), dvol(cpu, volume), lap(cpu, nb), lambda(cpu, nb);
+  DeviceArray<std::uint32_t> touched(cpu, nb);
   std::vector<std::uint32_t> all(nb);
   for (Index b = 0; b < nb; ++b) all[b] = std::uint32_t(b);
   DeviceArray<std::uint32_t> list(cpu, all);
@@ -61,7 +62,7 @@ TEST(FreezeKernels, FilmDiffusionConservesAndKeepsBounds) {
     exec::cpu::ParallelFor(nb, kernels::FilmLaplacian<double>{list.data(), grid.view(), dvol.data(), dfilm.data(), kernel, 0.01, lap.data(), lambda.data()});
     const double lambda_max = *std::max_element(lambda.data(), lambda.data() + nb);
     ASSERT_LE(dt * diffusivity * lambda_max, 1.0) << "default diffusion must need no sub-stepping at dt_ref (spec §9.3)";
-    exec::cpu::ParallelFor(nb, kernels::ApplyFilmDiffusion<double>{list.data(), lap.data(), dt * diffusivity, dfilm.data()});
+    exec::cpu::ParallelFor(nb, kernels::ApplyFilmDiffusion<double>{list.data(), lap.data(), dt * diffusivity, dfilm.data(), touched.data()});
   }
   const auto after = dfilm.ToHost();
   double sum = 0;
@@ -92,14 +93,18 @@ TEST(FreezeKernels, TransferIsBoundedAndMonotone) {
   DeviceArray<double> bvol(cpu, std::vector<double>{2.0 * kDp * kDp * kDp}), film(cpu, std::vector<double>{0.0});
   DeviceArray<std::uint8_t> phase(cpu, std::vector<std::uint8_t>{1}), valid(cpu, 1);
   DeviceArray<Vec3d> growth(cpu, 1);
+  DeviceArray<std::uint32_t> touched(cpu, 1);
   std::vector<std::uint32_t> offsets{0, std::uint32_t(n)}, index(n);
   for (Index j = 0; j < n; ++j) index[j] = std::uint32_t(j);
   DeviceArray<std::uint32_t> doff(cpu, offsets), dind(cpu, index), active(cpu, std::vector<std::uint32_t>{0});
   const kernels::FilmAndGrowth<double> k{active.data(), doff.data(), dind.data(), bx.data(), bvol.data(), phase.data(), fx.data(), fv.data(),
-                                         dd.data(), CubicSpline<double>(kH), Params(), 0.006, film.data(), growth.data(), valid.data()};
+                                         dd.data(), CubicSpline<double>(kH), Params(), 0.006, film.data(), growth.data(), valid.data(),
+                                         touched.data()};
   double last = 0;
   for (int step = 0; step < 10; ++step) {
+    touched.SetZero();
     k(0);
+    EXPECT_EQ(touched.ToHost()[0], film.ToHost()[0] != last ? 1u : 0u) << "a changed film is reported to the diffusion's caches";
     const double f = film.ToHost()[0];
     EXPECT_GE(f, last) << "transfer alone never lowers the film (T17)";
     EXPECT_LE(f, 1.0) << "film above Γ_max (T15)";

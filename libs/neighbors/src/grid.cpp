@@ -1,11 +1,18 @@
 #include "rime/neighbors/grid.h"
 
 #include <fmt/format.h>
+#include <tbb/enumerable_thread_specific.h>
+#include <tbb/parallel_for.h>
 #include <tbb/parallel_reduce.h>
 
 #include <bit>
 #include <cmath>
 #include <limits>
+#include <vector>
+
+#if defined(__AVX2__)
+#include <immintrin.h>
+#endif
 
 #include "rime/core/error.h"
 #include "rime/exec/kernel_list.h"
@@ -42,6 +49,107 @@ void CpuBounds(const Vec3<T>* points, Index n, Vec3<T>& lo, Vec3<T>& hi) {
   hi = box.finite ? box.hi : Vec3<T>(nan, nan, nan);
 }
 
+// The candidates of one query cell (the points of its up to 27 neighbor cells, in the order the
+// kernels visit them) as padded structure-of-arrays, and one query point's matches. Padding
+// points lie far away, so blocks of kLanes candidates need no tail handling.
+constexpr int kLanes = 8;
+
+#if defined(__AVX2__)
+// Left-packing permutations: row m moves the lanes whose bit is set in m to the front.
+struct LeftPackTable {
+  std::uint32_t lanes[256][kLanes];
+  constexpr LeftPackTable() : lanes{} {
+    for (int m = 0; m < 256; ++m) {
+      int k = 0;
+      for (int l = 0; l < kLanes; ++l)
+        if (m >> l & 1) lanes[m][k++] = std::uint32_t(l);
+    }
+  }
+};
+constexpr LeftPackTable kLeftPack;
+#endif
+
+template <class T>
+struct CellCandidates {
+  std::vector<T> x, y, z;
+  std::vector<std::uint32_t> j;
+  std::size_t count = 0, padded = 0;
+  std::vector<std::uint32_t> match_j;  // kLanes longer than the candidates: whole blocks are stored
+  std::vector<T> rx, ry, rz;
+
+  void Gather(const GridView<T>& target, const GridView<T>& source, std::uint32_t cell) {
+    const kernels::CellNeighborhood<T> hood(target, source, cell);
+    count = 0;
+    for (int k = 0; k < hood.count; ++k) count += hood.end[k] - hood.begin[k];
+    padded = (count + kLanes - 1) / kLanes * kLanes;
+    if (x.size() < padded) {
+      for (auto* a : {&x, &y, &z}) a->resize(padded);
+      j.resize(padded);
+      match_j.resize(padded + kLanes);
+      for (auto* a : {&rx, &ry, &rz}) a->resize(padded + kLanes);
+    }
+    std::size_t c = 0;
+    for (int k = 0; k < hood.count; ++k)
+      for (std::uint32_t t = hood.begin[k]; t < hood.end[k]; ++t, ++c) {
+        const std::uint32_t idx = target.sorted_index[t];
+        const Vec3<T> p = target.points[idx];
+        x[c] = p.x, y[c] = p.y, z[c] = p.z, j[c] = idx;
+      }
+    const T far = std::numeric_limits<T>::max() / 4;  // its squared distance overflows to +inf: never a neighbor
+    for (; c < padded; ++c) x[c] = y[c] = z[c] = far, j[c] = 0;
+  }
+
+  /// What Match keeps of the candidates within range: their number only, their indices (into
+  /// match_j), or also their offsets r = q − x_j (into rx, ry, rz).
+  enum class Keep { kCount, kIndices, kOffsets };
+
+  /// The number of candidates within sqrt(r2max) of q, except `self`, keeping what `kKeep` says.
+  /// The squared distance is the kernels' Dot(r, r) expression, so exactly the same pairs are found.
+  template <Keep kKeep>
+  std::size_t Match(const Vec3<T>& q, T r2max, std::uint32_t self) {
+#if defined(__AVX2__)
+    if constexpr (std::is_same_v<T, float>) {
+      typedef float Block __attribute__((vector_size(32)));
+      const Block qx = q.x - Block{}, qy = q.y - Block{}, qz = q.z - Block{};
+      const __m256 limit = _mm256_set1_ps(r2max);
+      const __m256i self_id = _mm256_set1_epi32(int(self));
+      std::size_t k = 0;
+      for (std::size_t c = 0; c < padded; c += kLanes) {
+        Block bx, by, bz;
+        __builtin_memcpy(&bx, &x[c], sizeof bx);
+        __builtin_memcpy(&by, &y[c], sizeof by);
+        __builtin_memcpy(&bz, &z[c], sizeof bz);
+        const Block dx = qx - bx, dy = qy - by, dz = qz - bz;
+        const Block d2 = dx * dx + dy * dy + dz * dz;
+        const __m256i ids = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(&j[c]));
+        const __m256 is_self = _mm256_castsi256_ps(_mm256_cmpeq_epi32(ids, self_id));
+        const int mask = _mm256_movemask_ps(_mm256_andnot_ps(is_self, _mm256_cmp_ps(__m256(d2), limit, _CMP_LT_OQ)));
+        if constexpr (kKeep != Keep::kCount) {
+          if (mask == 0) continue;
+          const __m256i pack = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(kLeftPack.lanes[mask]));
+          _mm256_storeu_si256(reinterpret_cast<__m256i*>(&match_j[k]), _mm256_permutevar8x32_epi32(ids, pack));
+          if constexpr (kKeep == Keep::kOffsets) {
+            _mm256_storeu_ps(&rx[k], _mm256_permutevar8x32_ps(__m256(dx), pack));
+            _mm256_storeu_ps(&ry[k], _mm256_permutevar8x32_ps(__m256(dy), pack));
+            _mm256_storeu_ps(&rz[k], _mm256_permutevar8x32_ps(__m256(dz), pack));
+          }
+        }
+        k += std::size_t(__builtin_popcount(unsigned(mask)));
+      }
+      return k;
+    }
+#endif
+    std::size_t k = 0;
+    for (std::size_t c = 0; c < count; ++c) {
+      const Vec3<T> r(q.x - x[c], q.y - y[c], q.z - z[c]);
+      if constexpr (kKeep != Keep::kCount) match_j[k] = j[c];
+      if constexpr (kKeep == Keep::kOffsets) rx[k] = r.x, ry[k] = r.y, rz[k] = r.z;
+      k += (Dot(r, r) < r2max) & (j[c] != self);  // branch-free: store always, advance on a match
+    }
+    return k;
+  }
+};
+
 }  // namespace
 
 template <class T>
@@ -76,6 +184,7 @@ void UniformGrid<T>::BuildImpl(const Vec3<T>* points, Index n, T cell_size, cons
   view_.count = static_cast<std::uint32_t>(n);
   view_.inv_cell = T(1) / cell_size;
   cells_ = 0;
+  dense_cells_.clear();
   if (n == 0) return;
 
   // Bounding box -> origin one cell below the minimum, so every point sits in a cell >= 1.
@@ -134,6 +243,33 @@ void UniformGrid<T>::BuildImpl(const Vec3<T>* points, Index n, T cell_size, cons
   view_.table_mask = table_size - 1;
   view_.cell_start = cell_start_.data();
   view_.sorted_index = sorted_index_.data();
+  if (!device_.is_cuda()) BuildDenseCells();
+}
+
+template <class T>
+void UniformGrid<T>::BuildDenseCells() {
+  GridView<T>& v = view_;
+  const auto coords = [&](std::uint32_t cell, std::int64_t c[3]) {
+    const Vec3<T> p = v.points[v.sorted_index[v.cell_start[cell]]];
+    c[0] = v.CellCoord(p.x, v.origin.x), c[1] = v.CellCoord(p.y, v.origin.y), c[2] = v.CellCoord(p.z, v.origin.z);
+  };
+  std::int64_t lo[3], hi[3], c[3];
+  coords(0, lo);
+  coords(0, hi);
+  for (std::uint32_t cell = 1; cell < cells_; ++cell) {
+    coords(cell, c);
+    for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], c[a]), hi[a] = std::max(hi[a], c[a]);
+  }
+  // Dense only while the box costs at most a few words per point (sparse or far-flung clouds hash).
+  const double box = double(hi[0] - lo[0] + 1) * double(hi[1] - lo[1] + 1) * double(hi[2] - lo[2] + 1);
+  if (box > 4.0 * double(v.count) + 65536.0) return;
+  for (int a = 0; a < 3; ++a) v.dense_lo[a] = lo[a], v.dense_dims[a] = hi[a] - lo[a] + 1;
+  dense_cells_.assign(std::size_t(box), GridView<T>::kNoCell);
+  for (std::uint32_t cell = 0; cell < cells_; ++cell) {
+    coords(cell, c);
+    dense_cells_[std::size_t(((c[2] - lo[2]) * v.dense_dims[1] + (c[1] - lo[1])) * v.dense_dims[0] + (c[0] - lo[0]))] = cell;
+  }
+  v.dense_cells = dense_cells_.data();
 }
 
 template <class T>
@@ -164,6 +300,10 @@ void UniformGrid<T>::QueryGrid(const UniformGrid& queries, T radius, bool exclud
     return;
   }
   if (radius > cell_size_ * T(1.0000001)) throw Error(ExitCode::kFailure, "neighbor grid: query radius exceeds the cell size");
+  if (!device_.is_cuda()) {
+    CpuQueryByCell(queries, radius, exclude_self, out, nullptr);
+    return;
+  }
   out.offsets.resize(m + 1);
   counts_.resize(m + 1);
   counts_.SetZero();
@@ -174,6 +314,82 @@ void UniformGrid<T>::QueryGrid(const UniformGrid& queries, T radius, bool exclud
   out.indices.resize(total);
   exec::ParallelFor(device_, cells,
                     kernels::FillNeighborsByCell<T>{view_, queries.view_, radius, exclude_self, out.offsets.data(), out.indices.data()});
+}
+
+template <class T>
+void UniformGrid<T>::QueryGrid(const UniformGrid& queries, T radius, bool exclude_self, NeighborList& out,
+                               const PairKernelArrays<T>& values) const {
+  const Index m = queries.size();
+  if (!device_.is_cuda() && aligned_with(queries) && view_.count > 0 && m > 0) {
+    if (radius > cell_size_ * T(1.0000001)) throw Error(ExitCode::kFailure, "neighbor grid: query radius exceeds the cell size");
+    CpuQueryByCell(queries, radius, exclude_self, out, &values);
+    return;
+  }
+  QueryGrid(queries, radius, exclude_self, out);
+  values.w.resize(out.pairs());
+  values.grad.resize(out.pairs());
+  exec::ParallelFor(device_, m,
+                    kernels::PairValues<T>{.xi = queries.view_.points, .xj = view_.points, .offsets = out.offsets.data(),
+                                           .index = out.indices.data(), .kernel = values.kernel, .w = values.w.data(), .grad = values.grad.data()});
+}
+
+// Two passes over the query cells, as the device kernels: count, scan, fill. Each cell copies its
+// candidates once into contiguous arrays that every point of the cell scans kLanes at a time.
+template <class T>
+void UniformGrid<T>::CpuQueryByCell(const UniformGrid& queries, T radius, bool exclude_self, NeighborList& out,
+                                    const PairKernelArrays<T>* values) const {
+  const Index m = queries.size();
+  const GridView<T> target = view_, source = queries.view_;
+  const T r2max = radius * radius;
+  const std::size_t cells = queries.cell_count();
+  static tbb::enumerable_thread_specific<CellCandidates<T>> scratch;
+  using Keep = typename CellCandidates<T>::Keep;
+  out.offsets.resize(m + 1);
+  counts_.resize(m + 1);
+  counts_.SetZero();
+  // visit(candidates, i, self) for every query point i, its cell's candidates gathered.
+  const auto for_each_query = [&](auto&& visit) {
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, cells, 8), [&](const tbb::blocked_range<std::size_t>& range) {
+      CellCandidates<T>& cand = scratch.local();
+      for (std::size_t cell = range.begin(); cell != range.end(); ++cell) {
+        cand.Gather(target, source, std::uint32_t(cell));
+        for (std::uint32_t s = source.cell_start[cell], e = source.cell_start[cell + 1]; s < e; ++s) {
+          const std::uint32_t i = source.sorted_index[s];
+          visit(cand, i, exclude_self ? i : ~0u);
+        }
+      }
+    });
+  };
+  std::uint32_t* counts = counts_.data();
+  for_each_query([&](CellCandidates<T>& cand, std::uint32_t i, std::uint32_t self) {
+    counts[i] = std::uint32_t(cand.template Match<Keep::kCount>(source.points[i], r2max, self));
+  });
+  const std::uint64_t total = exec::ExclusiveScan(device_, counts_.data(), out.offsets.data(), m + 1);
+  if (total > 0xffffffffULL) throw Error(ExitCode::kFailure, "neighbor grid: more than 2^32 neighbor pairs");
+  out.indices.resize(total);
+  if (values) {
+    values->w.resize(total);
+    values->grad.resize(total);
+  }
+  const std::uint32_t* offsets = out.offsets.data();
+  std::uint32_t* indices = out.indices.data();
+  T* w = values ? values->w.data() : nullptr;
+  Vec3<T>* grad = values ? values->grad.data() : nullptr;
+  for_each_query([&](CellCandidates<T>& cand, std::uint32_t i, std::uint32_t self) {
+    const std::uint32_t first = offsets[i];
+    const std::size_t found = values ? cand.template Match<Keep::kOffsets>(source.points[i], r2max, self)
+                                     : cand.template Match<Keep::kIndices>(source.points[i], r2max, self);
+    std::copy_n(cand.match_j.data(), found, indices + first);
+    if (!values) return;
+    // The expressions of kernels::PairValues, so the values are the same bits.
+    const CubicSpline<T> kernel = values->kernel;
+    for (std::size_t k = 0; k < found; ++k) {
+      const Vec3<T> r(cand.rx[k], cand.ry[k], cand.rz[k]);
+      const T len = Norm(r);
+      w[first + k] = kernel.W(len);
+      grad[first + k] = r * kernel.GradientFactor(len);
+    }
+  });
 }
 
 template class UniformGrid<float>;

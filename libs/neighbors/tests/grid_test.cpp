@@ -5,6 +5,7 @@
 #include <random>
 
 #include "rime/core/error.h"
+#include "rime/exec/parallel.h"
 #include "rime/neighbors/grid.h"
 
 namespace rime::neighbors {
@@ -137,6 +138,72 @@ TEST(UniformGrid, QueryGridMatchesQuery) {
       }
     }
   }
+}
+
+}  // namespace
+}  // namespace rime::neighbors
+
+namespace rime::neighbors {
+namespace {
+
+// The CPU's vectorised cell-by-cell search gives the device kernels' lists in their order, and
+// the pair values of kernels::PairValues bit for bit (the solver's results depend on both).
+template <class T>
+void CheckCpuPathAgainstKernels(bool clustered, bool self) {
+  std::mt19937 rng(91);
+  const exec::Device device = exec::Device::Cpu();
+  const auto a = RandomCloud<T>(3000, clustered, T(0), rng);
+  const auto b = RandomCloud<T>(4000, clustered, T(0), rng);
+  exec::DeviceArray<Vec3<T>> da(device, a), db(device, b);
+  const T cell = T(0.05);
+  const Vec3<T> origin(T(-1), T(-1), T(-1));
+  UniformGrid<T> queries(device), other(device);
+  queries.Build(da.data(), Index(a.size()), cell, origin);
+  other.Build(db.data(), Index(b.size()), cell, origin);
+  const UniformGrid<T>& target = self ? queries : other;
+  const T radius = cell * T(0.999);
+  const CubicSpline<T> kernel(radius / 2);
+
+  // Reference: the kernels the CUDA backend runs, on the CPU.
+  const Index m = Index(a.size());
+  exec::DeviceArray<std::uint32_t> counts(device, m + 1), offsets(device, m + 1);
+  counts.SetZero();
+  const Index cells = Index(queries.cell_count());
+  exec::cpu::ParallelFor(cells, kernels::CountNeighborsByCell<T>{target.view(), queries.view(), radius, self, counts.data()});
+  const std::uint64_t total = exec::ExclusiveScan(device, counts.data(), offsets.data(), m + 1);
+  exec::DeviceArray<std::uint32_t> indices(device, total);
+  exec::cpu::ParallelFor(cells, kernels::FillNeighborsByCell<T>{target.view(), queries.view(), radius, self, offsets.data(), indices.data()});
+  exec::DeviceArray<T> w(device, total);
+  exec::DeviceArray<Vec3<T>> grad(device, total);
+  exec::cpu::ParallelFor(m, kernels::PairValues<T>{.xi = da.data(), .xj = target.view().points, .offsets = offsets.data(), .index = indices.data(),
+                                                   .kernel = kernel, .w = w.data(), .grad = grad.data()});
+
+  NeighborList plain(device), with_values(device);
+  exec::DeviceArray<T> fused_w(device);
+  exec::DeviceArray<Vec3<T>> fused_grad(device);
+  target.QueryGrid(queries, radius, self, plain);
+  target.QueryGrid(queries, radius, self, with_values, {.kernel = kernel, .w = fused_w, .grad = fused_grad});
+  ASSERT_GT(total, 1000u);
+  for (const NeighborList* list : {&plain, &with_values}) {
+    ASSERT_EQ(list->offsets.ToHost(), offsets.ToHost());
+    ASSERT_EQ(list->indices.ToHost(), indices.ToHost());
+  }
+  const auto w_expected = w.ToHost(), w_got = fused_w.ToHost();
+  const auto g_expected = grad.ToHost(), g_got = fused_grad.ToHost();
+  ASSERT_EQ(w_got.size(), total);
+  ASSERT_EQ(g_got.size(), total);
+  for (std::size_t k = 0; k < total; ++k) {
+    ASSERT_EQ(w_got[k], w_expected[k]) << "pair " << k;
+    ASSERT_EQ(g_got[k], g_expected[k]) << "pair " << k;
+  }
+}
+
+TEST(UniformGrid, CpuQueryGridMatchesTheKernelsExactly) {
+  for (bool clustered : {false, true})
+    for (bool self : {true, false}) {
+      CheckCpuPathAgainstKernels<float>(clustered, self);
+      CheckCpuPathAgainstKernels<double>(clustered, self);
+    }
 }
 
 }  // namespace

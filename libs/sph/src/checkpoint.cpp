@@ -92,6 +92,7 @@ void Simulation<T>::Restore(const io::ParticleFrame& f) {
     s.ice_count = Index(ice.size());
     if (!ice.empty()) s.boundary_grid.Build(s.boundary.x.data(), s.nb(), T(2 * scene_.fluid.smoothing_length()), lattice_origin_);
     FinishBoundaryVolumes();
+    s.freezing_work->diffusion_cache_valid = false;
   }
   UpdateBoundaryMotion(time_);
 }

@@ -17,27 +17,25 @@ void Simulation<T>::NeighborSearch() {
   State& s = *state_;
   const Index n = s.n();
   const T support = T(2 * scene_.fluid.smoothing_length());
-  s.fluid_grid.Build(s.fluid.x.data(), n, support, lattice_origin_);
-  // Reorder the persistent water state along the grid's Z curve for cache locality.
-  s.order.resize(n);
-  exec::CopyOnDevice(device_, s.order.data(), s.fluid_grid.order(), n * sizeof(std::uint32_t));
-  s.GatherFluid(device_, n);
-  s.fluid_grid.AdoptOrder(s.fluid.x.data());
+  {
+    PhaseTimer t(device_, timing_enabled_, timings_.grid_build);
+    s.fluid_grid.Build(s.fluid.x.data(), n, support, lattice_origin_);
+    // Reorder the persistent water state along the grid's Z curve for cache locality.
+    s.order.resize(n);
+    exec::CopyOnDevice(device_, s.order.data(), s.fluid_grid.order(), n * sizeof(std::uint32_t));
+    s.GatherFluid(device_, n);
+    s.fluid_grid.AdoptOrder(s.fluid.x.data());
+  }
 
   const CubicSpline<T> kernel(T(scene_.fluid.smoothing_length()));
   Neighborhoods<T>& p = s.pairs;
-  // w and ∇W of every pair, from the water (ff) and from the boundary (fb).
-  auto pair_values = [&](const neighbors::UniformGrid<T>& grid, bool same, const Vec3<T>* xj, neighbors::NeighborList& list,
-                         DeviceArray<T>& w, DeviceArray<Vec3<T>>& grad) {
-    grid.QueryGrid(s.fluid_grid, support, same, list);
-    w.resize(list.pairs());
-    grad.resize(list.pairs());
-    exec::ParallelFor(device_, n,
-                      kernels::PairValues<T>{.xi = s.fluid.x.data(), .xj = xj, .offsets = list.offsets.data(), .index = list.indices.data(),
-                                             .kernel = kernel, .w = w.data(), .grad = grad.data()});
-  };
-  pair_values(s.fluid_grid, true, s.fluid.x.data(), p.ff, p.ff_w, p.ff_grad);
-  pair_values(s.boundary_grid, false, s.boundary.x.data(), p.fb, p.fb_w, p.fb_grad);
+  // w and ∇W of every pair, from the water (ff) and from the boundary (fb), found with the lists.
+  {
+    PhaseTimer t(device_, timing_enabled_, timings_.fluid_lists);
+    s.fluid_grid.QueryGrid(s.fluid_grid, support, true, p.ff, {.kernel = kernel, .w = p.ff_w, .grad = p.ff_grad});
+  }
+  PhaseTimer t(device_, timing_enabled_, timings_.boundary_lists);
+  s.boundary_grid.QueryGrid(s.fluid_grid, support, false, p.fb, {.kernel = kernel, .w = p.fb_w, .grad = p.fb_grad});
 }
 
 template <class T>

@@ -3,7 +3,6 @@
 #include <fmt/format.h>
 
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 
 #include "rime/boundary/volumes.h"
@@ -22,29 +21,12 @@ namespace rime::sph {
 
 namespace {
 
-class PhaseTimer {
- public:
-  PhaseTimer(const exec::Device& device, bool enabled, double& slot) : device_(device), enabled_(enabled), slot_(slot) {
-    if (enabled_) start_ = std::chrono::steady_clock::now();
-  }
-  ~PhaseTimer() {
-    if (!enabled_) return;
-    exec::Synchronize(device_);
-    slot_ += std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
-  }
-
- private:
-  const exec::Device& device_;
-  bool enabled_;
-  double& slot_;
-  std::chrono::steady_clock::time_point start_;
-};
-
 // The largest step the explicit non-pressure forces allow, and the scene parameter that sets it
 // (empty when nothing limits). The pressure solve is implicit and the wall viscosity is solved
 // per particle, so only these bind:
 //   Monaghan viscosity Δt ν/h² ≤ 0.1 with ν = β0 β1 h/10 (spec §5.2); Morris Δt μ/(ρ0 h²) ≤ 0.1;
-//   surface tension Δt ≤ 0.25 √(h/a) with a ≈ κ/(ρ0 h³) (He 2014) or a ≈ γ ρ0 (Akinci 2013).
+//   surface tension Δt ≤ 0.25 √(h/a) with a ≈ κ/(ρ0 h³) (He 2014) or a ≈ γ ρ0 (Akinci 2013);
+//   air pressure the same with a ≈ p_atm/(ρ0 h), its push on a free-surface particle.
 std::pair<double, std::string> ExplicitStepLimit(const io::Scene& scene, const ModuleRegistry& modules) {
   double limit = 1e30;
   std::string parameter;
@@ -67,6 +49,8 @@ std::pair<double, std::string> ExplicitStepLimit(const io::Scene& scene, const M
       if (kappa > 0) bound(0.25 * std::sqrt(rho0 * h * h * h * h / kappa), st.kappa >= st.kappa_boundary ? "surface_tension.kappa" : "surface_tension.kappa_boundary");
     }
   }
+  if (modules.Enabled("air_pressure") && scene.air_pressure.p_atm > 0)
+    bound(0.25 * h * std::sqrt(rho0 / scene.air_pressure.p_atm), "air_pressure.p_atm");
   return {limit, parameter};
 }
 

@@ -4,6 +4,7 @@
 /// freezing groups are libs/freeze's), which exist only while their module is on. Private to libs/sph.
 #pragma once
 
+#include <chrono>
 #include <optional>
 #include <vector>
 
@@ -242,6 +243,25 @@ template <class T>
 Vec3<T> ToT(const Vec3d& v) {
   return {T(v.x), T(v.y), T(v.z)};
 }
+
+/// Adds the wall-clock time of its scope (after the device finished) to `slot` when enabled.
+class PhaseTimer {
+ public:
+  PhaseTimer(const exec::Device& device, bool enabled, double& slot) : device_(device), enabled_(enabled), slot_(slot) {
+    if (enabled_) start_ = std::chrono::steady_clock::now();
+  }
+  ~PhaseTimer() {
+    if (!enabled_) return;
+    exec::Synchronize(device_);
+    slot_ += std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
+  }
+
+ private:
+  const exec::Device& device_;
+  bool enabled_;
+  double& slot_;
+  std::chrono::steady_clock::time_point start_;
+};
 
 /// Where a scene value came from, for error messages: "file: field", or the field alone for scenes
 /// built in code.

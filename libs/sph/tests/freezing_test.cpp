@@ -341,6 +341,31 @@ TEST(Freezing, ResumeWithNucleationDelayIsBitIdentical) {
   EXPECT_EQ(resumed.Positions(), straight->Positions());
 }
 
+// The film diffusion keeps its region and Laplacians between steps and updates them only where
+// the film or the boundary changed; a run restored from a frame every few steps recomputes them
+// all each time (Restore drops the caches). Both must give the same film, ice and water, bit for bit.
+TEST(Freezing, FilmDiffusionCachesMatchRecomputingEverything) {
+  const io::Scene scene = DropScene(0.05, 0.01);
+  auto cached = Make(scene);
+  auto rebuilt = Make(scene);
+  for (int segment = 1; segment <= 8; ++segment) {
+    const double stop = 0.04 * segment;
+    while (cached->time() < stop - 1e-9) cached->Step(cached->NextTimeStep(stop));
+    while (rebuilt->time() < stop - 1e-9) rebuilt->Step(rebuilt->NextTimeStep(stop));
+    const io::ParticleFrame frame = rebuilt->Snapshot(segment);
+    rebuilt = std::make_unique<Simulation<float>>(scene, exec::Device::Cpu());
+    rebuilt->AddBoundaryObject(test::BoxBoundary(kDp, 0.72, 0.72, 0.2), "box");
+    rebuilt->Restore(frame);
+  }
+  const io::ParticleFrame a = cached->Snapshot(0), b = rebuilt->Snapshot(0);
+  ASSERT_GT(cached->ice_count(), 0) << "nothing froze: the caches were not tested against new ice";
+  const auto& film = a.Get<float>("water_film");
+  ASSERT_GT(std::count_if(film.begin(), film.end(), [](float f) { return f > 0 && f < 1; }), 10) << "no film diffused";
+  EXPECT_EQ(film, b.Get<float>("water_film"));
+  EXPECT_EQ(Observe(*cached).ice, Observe(*rebuilt).ice);
+  EXPECT_EQ(cached->Positions(), rebuilt->Positions());
+}
+
 // gravity_growth: a stream poured onto the floor keeps landing on the ice it made. Without it the
 // ice grows along the splash, up into the stream, into a mound; with it the ice stays a coat.
 TEST(Freezing, GravityGrowthKeepsAPouredStreamFromPilingUpIce) {

@@ -37,7 +37,7 @@ struct FluidOnlyPairs {
     fb.offsets.SetZero();
     w.resize(ff.pairs());
     grad.resize(ff.pairs());
-    exec::cpu::ParallelFor(n, kernels::PairValues<double>{x.data(), x.data(), ff.offsets.data(), ff.indices.data(), kernel, w.data(), grad.data()});
+    exec::cpu::ParallelFor(n, neighbors::kernels::PairValues<double>{x.data(), x.data(), ff.offsets.data(), ff.indices.data(), kernel, w.data(), grad.data()});
   }
   Pairs<double> FF() const { return {ff.offsets.data(), ff.indices.data(), w.data(), grad.data()}; }
   Pairs<double> FB() const { return {fb.offsets.data(), nullptr, nullptr, nullptr}; }

@@ -568,13 +568,9 @@ std::uint64_t EstimateMemoryBytes(const ParticleSet& particles, const Settings& 
     v->erase(std::unique(v->begin(), v->end()), v->end());
   }
   const double node_bytes = upper1.size() * 4096 * 12.0 + upper2.size() * 32768 * 12.0;
-  // The mesh and OpenVDB's meshing buffers. Measured with rime_surface_bench (2026-12-01): 26
-  // (jittered ball) to 146 (two-layer sheet) triangles per leaf; the sheet's whole process peaked
-  // at 1,047 MB for 2M particles and 18.6M triangles, 127k leaves. With 6 kB per leaf the
-  // estimate stays above the whole process's peak at 500k and 2M particles (1.3-1.5x the sheet's,
-  // 1.5-1.7x the ball's); 12 kB, from the previous mesher, overstated them 2.0-2.3x and refused
-  // frames that fit. At 50k the process's fixed ~30 MB (libraries, the benchmark's own copy of
-  // the particles) is most of the peak, which the estimate does not count.
+  // The mesh and OpenVDB's meshing buffers: 26 (jittered ball) to 146 (two-layer sheet) triangles
+  // per leaf; 6 kB per leaf keeps the estimate above the measured peak at 0.5–2M particles
+  // (docs/reliability.md, memory budgets). The process's fixed ~30 MB is not counted.
   const double mesh_bytes = settings.mesh ? plan.targets.size() * 6000.0 : 0.0;
   return std::uint64_t(plan.targets.size() * leaf_bytes * 1.5 + node_bytes * 2 + n * particle_bytes + mesh_bytes);
 }

@@ -49,7 +49,7 @@ constexpr double kSphereRadius = 0.2;
 constexpr std::size_t kBitSize = 3;
 const Vec3d kSphereCenter{0, 0, 0.35};
 
-// Both scenes share the ground, the sphere and the freezing thresholds of examples/default.toml.
+// Both scenes share the ground, the sphere and the freezing thresholds (a block dropped on a sphere).
 // One run: a method preset plus, for the ablation, single switches of the im2013 preset on top of "rime".
 struct Variant {
   std::string label, method;

@@ -18,6 +18,7 @@ enum class ExitCode : int {
   kDiverged = 4,     // the simulation blew up (NaN, density error above the limit)
   kIo = 5,           // could not write output (disk full, permissions)
   kNoDevice = 6,     // requested device not usable (e.g. --device cuda without a GPU)
+  kOverBudget = 10,  // estimated peak memory above --memory-budget (nothing written)
   kInterrupted = 130,
 };
 

@@ -13,10 +13,6 @@
 
 namespace rime {
 
-/// Exit code of a stage that refuses to start because its estimated peak memory is above the
-/// budget (documented beside ExitCode's codes in README.md "Exit codes").
-inline constexpr ExitCode kExitOverBudget = static_cast<ExitCode>(10);
-
 /// Bytes from `512M`, `4G`, `1.5GiB`, `100000`: a decimal number with an optional suffix K, M, G
 /// or T (each may be followed by `i` and/or `B`, any case), all powers of 1024 as in Slurm's
 /// --mem. Throws rime::Error (kUsage) naming `flag` for anything else, zero, or above 2^63.
@@ -47,7 +43,7 @@ double ConcurrentPeak(const std::vector<double>& estimates, std::size_t at_once,
 /// Resident memory of this process now (/proc/self/statm), bytes; 0 when it cannot be read.
 std::uint64_t ResidentBytes();
 
-/// Throws rime::Error (kExitOverBudget) when this process's resident memory now plus
+/// Throws rime::Error (ExitCode::kOverBudget) when this process's resident memory now plus
 /// `estimate_bytes` (what the work will allocate on top of it) exceeds the budget, as one line:
 /// `needs about 14.2 GiB for 310 M voxels (frame f.h5part, voxel 2 mm), budget 8 GiB (--memory-budget)`.
 /// `driver` is what the estimate grows with, `context` the input that drives it.

@@ -73,18 +73,26 @@ struct FreezingFluid : exec::AttributeGroup<FreezingFluid<T>> {
   }
 };
 
-/// Per-step work arrays of the freezing step (sized by it: water, boundary or list lengths).
+/// Work arrays of the freezing step (sized by it: water, boundary or list lengths), and the film
+/// diffusion's caches, kept from step to step while the boundary does not move: the region, the
+/// wet set it was formed from, and every region particle's Laplacian and stability bound, valid
+/// until the film changes within its support (film_touched) or the boundary changes near it
+/// (structure_touched: new ice and the volumes it changed, set by the solver).
 template <class T>
 struct FreezingWork : exec::AttributeGroup<FreezingWork<T>> {
   static constexpr const char* kModule = "freezing";
   explicit FreezingWork(const exec::Device& d)
       : fluid_d(d), fluid_flag(d), boundary_active(d), active_list(d), decision(d), trigger(d), frozen(d), wet(d), region(d),
-        region_list(d), energy_solid(d), energy_ice(d), laplacian(d), lambda(d), active_x(d), bf(d) {}
+        region_list(d), energy_solid(d), energy_ice(d), laplacian(d), lambda(d), active_x(d), bf(d), wet_seen(d), newly_wet(d), dried(d),
+        stale(d), evaluate(d), film_touched(d), structure_touched(d), change_list(d), region_lambda(d) {}
   DeviceArray<Sym6<T>> fluid_d;  // water: anisotropy D of this step
   DeviceArray<std::uint32_t> fluid_flag, boundary_active, active_list, decision, trigger, frozen, wet, region, region_list;
-  DeviceArray<T> energy_solid, energy_ice, laplacian, lambda;
+  DeviceArray<T> energy_solid, energy_ice, laplacian, lambda;  // laplacian, lambda: per boundary particle
   DeviceArray<Vec3<T>> active_x;
   neighbors::NeighborList bf;  // boundary–fluid pairs of the boundary particles touching water
+  DeviceArray<std::uint32_t> wet_seen, newly_wet, dried, stale, evaluate, film_touched, structure_touched, change_list;
+  DeviceArray<T> region_lambda;
+  bool diffusion_cache_valid = false;  // the solver clears it when the boundary moves or is restored
 
   template <class Self, class F>
   static void Visit(Self& s, F& f) {
@@ -105,6 +113,15 @@ struct FreezingWork : exec::AttributeGroup<FreezingWork<T>> {
     f(AttributeInfo{.name = "active_positions"}, s.active_x);
     f(AttributeInfo{.name = "bf_offsets"}, s.bf.offsets);
     f(AttributeInfo{.name = "bf_indices"}, s.bf.indices);
+    f(AttributeInfo{.name = "wet_seen"}, s.wet_seen);
+    f(AttributeInfo{.name = "newly_wet"}, s.newly_wet);
+    f(AttributeInfo{.name = "dried"}, s.dried);
+    f(AttributeInfo{.name = "film_stale"}, s.stale);
+    f(AttributeInfo{.name = "film_evaluate"}, s.evaluate);
+    f(AttributeInfo{.name = "film_touched"}, s.film_touched);
+    f(AttributeInfo{.name = "structure_touched"}, s.structure_touched);
+    f(AttributeInfo{.name = "change_list"}, s.change_list);
+    f(AttributeInfo{.name = "region_lambda"}, s.region_lambda);
   }
 };
 
@@ -122,6 +139,7 @@ struct Particles {
   const std::uint8_t* boundary_phase = nullptr;
   const neighbors::UniformGrid<T>* boundary_grid = nullptr;
   double viscosity_epsilon = 0;  // the film Laplacian's regularisation, as the viscosity's
+  bool boundary_moves = false;   // an animated solid: the diffusion's caches are rebuilt every time
 };
 
 /// The freezing kernels' parameters from the scene.

@@ -118,6 +118,7 @@ struct FilmAndGrowth {
   T* film;  // Γ/Γ_max ∈ [0,1]
   Vec3<T>* growth;
   std::uint8_t* growth_valid;
+  std::uint32_t* film_touched;  // set where the film changed (the diffusion re-evaluates around it)
   RIME_HD void operator()(Index k) const {
     const std::uint32_t b = active[k];
     const std::uint32_t begin = bf_offsets[k], end = bf_offsets[k + 1];
@@ -136,7 +137,9 @@ struct FilmAndGrowth {
     const T alpha = boundary_phase[b] == kIcePhase ? params.alpha_ice : params.alpha_solid;
     const T s = alpha * boundary_volume[b] * density_sum / params.film_max;
     const T keep = std::pow(T(1) - (s < T(1) ? s : T(1)), dt / params.dt_ref);
-    film[b] = T(1) - (T(1) - film[b]) * keep;
+    const T wetted = T(1) - (T(1) - film[b]) * keep;
+    if (wetted != film[b]) film_touched[b] = 1u;
+    film[b] = wetted;
     gv /= T(end - begin);
     growth[b] = gv;
     growth_valid[b] = Norm(gv) > T(1e-9) * kernel.W0() ? 1 : 0;
@@ -166,6 +169,98 @@ struct DilateWet {
   }
 };
 
+/// The diffusion's caches between steps (the boundary does not move): which particles became wet
+/// or dry since the region was last formed; remembers the wet set.
+struct WetChanges {
+  const std::uint32_t* wet;
+  std::uint32_t* wet_seen;
+  std::uint32_t* newly_wet;
+  std::uint32_t* dried;
+  RIME_HD void operator()(Index b) const {
+    newly_wet[b] = wet[b] & (1u - wet_seen[b]);
+    dried[b] = wet_seen[b] & (1u - wet[b]);
+    wet_seen[b] = wet[b];
+  }
+};
+
+/// Adds the listed newly wet particles and their neighbors to the region; those that enter it
+/// have no valid Laplacian yet (stale).
+template <class T>
+struct GrowRegion {
+  neighbors::GridView<T> grid;
+  const std::uint32_t* list;
+  T radius;
+  std::uint32_t* region;
+  std::uint32_t* stale;
+  RIME_HD void operator()(Index k) const {
+    grid.ForEachNeighbor(grid.points[list[k]], radius, [&](std::uint32_t n, const Vec3<T>&, T) {
+      if (!region[n]) region[n] = 1u, stale[n] = 1u;  // benign races: same values
+    });
+  }
+};
+
+/// Whether each listed particle (new ice and its surroundings) is wet or next to a wet one: its
+/// region membership after the boundary changed near it.
+template <class T>
+struct JoinRegion {
+  neighbors::GridView<T> grid;
+  const std::uint32_t* list;
+  const std::uint32_t* wet;
+  T radius;
+  std::uint32_t* region;
+  std::uint32_t* stale;
+  RIME_HD void operator()(Index k) const {
+    const std::uint32_t b = list[k];
+    if (region[b]) return;
+    bool near_wet = false;
+    grid.ForEachNeighbor(grid.points[b], radius, [&](std::uint32_t n, const Vec3<T>&, T) { near_wet = near_wet || wet[n] != 0; });
+    if (near_wet) region[b] = 1u, stale[b] = 1u;
+  }
+};
+
+/// evaluate[n] = 1 for every region particle n within the radius of a listed (changed) particle:
+/// the Laplacians that the change can alter.
+template <class T>
+struct MarkAffected {
+  neighbors::GridView<T> grid;
+  const std::uint32_t* list;
+  const std::uint32_t* region;
+  T radius;
+  std::uint32_t* evaluate;
+  RIME_HD void operator()(Index k) const {
+    grid.ForEachNeighbor(grid.points[list[k]], radius, [&](std::uint32_t n, const Vec3<T>&, T) {
+      if (region[n]) evaluate[n] = 1u;
+    });
+  }
+};
+
+/// Adds the stale region particles to the evaluation; stale stays set outside the region.
+struct AddStale {
+  const std::uint32_t* region;
+  std::uint32_t* stale;
+  std::uint32_t* evaluate;
+  RIME_HD void operator()(Index b) const {
+    evaluate[b] |= stale[b] & region[b];
+    stale[b] &= 1u - region[b];
+  }
+};
+
+/// flags[list[k]] = 1 for every listed particle.
+struct FlagListed {
+  const std::uint32_t* list;
+  std::uint32_t* flags;
+  RIME_HD void operator()(Index k) const { flags[list[k]] = 1u; }
+};
+
+/// out[k] = values[list[k]].
+template <class T>
+struct GatherListed {
+  const std::uint32_t* list;
+  const T* values;
+  T* out;
+  RIME_HD void operator()(Index k) const { out[k] = values[list[k]]; }
+};
+
 /// Conservative SPH Laplacian of the film over the boundary graph (spec §9.3):
 /// L_b = 2 Σ_k V̄_bk (Γ_k − Γ_b)(−x_bk·∇W_bk)/(r²+εh²); also the stability bound λ_b.
 template <class T>
@@ -176,8 +271,8 @@ struct FilmLaplacian {
   const T* film;
   CubicSpline<T> kernel;
   T epsilon;
-  T* laplacian;  // per list entry
-  T* lambda;     // per list entry
+  T* laplacian;  // per boundary particle (of the listed ones)
+  T* lambda;     // per boundary particle (of the listed ones)
   RIME_HD void operator()(Index k) const {
     const std::uint32_t b = list[k];
     const Vec3<T> xb = grid.points[b];
@@ -190,8 +285,8 @@ struct FilmLaplacian {
       l += weight * (film[n] - fb);
       lam += weight;
     });
-    laplacian[k] = l;
-    lambda[k] = lam;
+    laplacian[b] = l;
+    lambda[b] = lam;
   }
 };
 
@@ -199,12 +294,16 @@ struct FilmLaplacian {
 template <class T>
 struct ApplyFilmDiffusion {
   const std::uint32_t* list;
-  const T* laplacian;
+  const T* laplacian;  // per boundary particle
   T step;  // Δt_sub · D_Γ
   T* film;
+  std::uint32_t* film_touched;
   RIME_HD void operator()(Index k) const {
-    T f = film[list[k]] + step * laplacian[k];
-    film[list[k]] = f < T(0) ? T(0) : (f > T(1) ? T(1) : f);  // guards rounding only: the step is a convex combination
+    const std::uint32_t b = list[k];
+    T f = film[b] + step * laplacian[b];
+    f = f < T(0) ? T(0) : (f > T(1) ? T(1) : f);  // guards rounding only: the step is a convex combination
+    if (f != film[b]) film_touched[b] = 1u;
+    film[b] = f;
   }
 };
 
@@ -213,7 +312,12 @@ template <class T>
 struct DryFilm {
   T factor;
   T* film;
-  RIME_HD void operator()(Index b) const { film[b] *= factor; }
+  std::uint32_t* film_touched;
+  RIME_HD void operator()(Index b) const {
+    const T dried = film[b] * factor;
+    if (dried != film[b]) film_touched[b] = 1u;
+    film[b] = dried;
+  }
 };
 
 /// Freezing fraction fr_bj (spec §9.5) for boundary b and fluid j.
@@ -330,8 +434,10 @@ struct KeepUnfrozen {
   X(rime::freeze::kernels::FilmAndGrowth<T>) X(rime::freeze::kernels::MarkWet<T>) X(rime::freeze::kernels::DilateWet<T>) \
   X(rime::freeze::kernels::FilmLaplacian<T>) X(rime::freeze::kernels::ApplyFilmDiffusion<T>)                           \
   X(rime::freeze::kernels::DryFilm<T>) X(rime::freeze::kernels::PhaseDecision<T>)                                     \
-  X(rime::freeze::kernels::NucleationDelay<T>)
+  X(rime::freeze::kernels::NucleationDelay<T>) X(rime::freeze::kernels::GrowRegion<T>) X(rime::freeze::kernels::JoinRegion<T>) \
+  X(rime::freeze::kernels::MarkAffected<T>) X(rime::freeze::kernels::GatherListed<T>)
 
 #define RIME_FREEZE_KERNELS(X)                                                                                   \
   RIME_FREEZE_KERNELS_T(X, float) RIME_FREEZE_KERNELS_T(X, double) X(rime::freeze::kernels::MarkFluidFromBoundary) \
-  X(rime::freeze::kernels::KeepUnfrozen)
+  X(rime::freeze::kernels::KeepUnfrozen) X(rime::freeze::kernels::WetChanges) X(rime::freeze::kernels::AddStale)    \
+  X(rime::freeze::kernels::FlagListed)

@@ -119,7 +119,7 @@ struct SolverSettings {
     f(Param{.name = "cfl", .range = Range::OpenClosed(0, 0.7), .help = "λ in Δt = λ d_p / max(‖v‖, √(2 g H)),",
             .doc = "H the water's extent along gravity (the speed its own weight can give it: deep water at rest would "
                    "otherwise step at `dt_max` and diverge, e.g. a 0.5 m column at d_p = 12.5 mm at 6 ms), also capped by "
-                   "the explicit limits of viscosity and surface tension (a scene whose limit falls below `dt_min` is "
+                   "the explicit limits of viscosity, surface tension and air pressure (a scene whose limit falls below `dt_min` is "
                    "refused, naming the parameter). Above 0.7 particles tunnel through single-layer walls; a step that "
                    "moves a particle more than 0.8 spacings stops the run as diverged"}, s.cfl);
     f(Param{.name = "dt_min", .unit = "s", .range = Range::OpenClosed(0, 1), .help = "lower clamp of the CFL step"}, s.dt_min);
@@ -407,7 +407,7 @@ struct FluidBlock {
     f(Param{.name = "shape", .help = "a box, or a sphere"}, s.shape);
     f(Param{.name = "min", .unit = "m", .help = "box corner: the lattice of spacing d_p starts here"}, s.min);
     f(Param{.name = "max", .unit = "m", .help = "box corner, beyond `min` on every axis",
-            .doc = "(included when the extent is a multiple of d_p: the default example's 0.3 × 0.3 × 0.24 m block holds "
+            .doc = "(included when the extent is a multiple of d_p: the sphere drop's 0.3 × 0.3 × 0.24 m block holds "
                    "16 × 16 × 13 = 3,328 particles)"}, s.max);
     f(Param{.name = "center", .unit = "m", .help = "sphere centre"}, s.center);
     f(Param{.name = "radius", .unit = "m", .range = Range::Positive(), .help = "sphere: lattice points within it of `center`"},

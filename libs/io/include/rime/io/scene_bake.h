@@ -22,6 +22,7 @@ struct BakeSettings {
   PreviewEngine preview_engine = PreviewEngine::kWorkbench;
   int preview_samples = 16;
   int contact_sheet_columns = 4;
+  Vec3d preview_view{1.0, -1.4, 0.8};
 
   template <class Self, class F>
   static void Visit(Self& s, F&& f) {
@@ -34,6 +35,9 @@ struct BakeSettings {
             .help = "Cycles samples per pixel (Workbench ignores it)"}, s.preview_samples);
     f(Param{.name = "contact_sheet_columns", .range = Range::Closed(1, 64), .help = "frames per row of `contact_sheet.png`"},
       s.contact_sheet_columns);
+    f(Param{.name = "preview_view", .range = Range::Closed(-1e6, 1e6),
+            .help = "direction from the scene's centre to the camera (z up), not the zero vector; the camera always frames the whole `[domain]`"},
+      s.preview_view);
   }
 };
 

@@ -81,7 +81,7 @@ struct SurfaceSettings {
             .doc = "(OpenVDB); real sheets keep their thickness", .flag = "--close"}, s.close);
     f(Param{.name = "smooth", .unit = "iterations", .range = Range::Closed(0, 100),
             .help = "OpenVDB level-set mean-curvature smoothing after the closing, for the ellipsoids and isotropic fields",
-            .doc = "(ice); removes particle-sized bumps (10 takes the default example's noise from 0.081 to 0.049 d_p, "
+            .doc = "(ice); removes particle-sized bumps (10 takes the sphere drop's noise from 0.081 to 0.049 d_p, "
                    "[ice-look.md](ice-look.md))", .flag = "--smooth"}, s.smooth);
     f(Param{.name = "velocity", .help = "add a `vel` vec3 grid (particle velocities, for motion blur) to the VDB",
             .flag = "--vel"}, s.velocity);

@@ -11,11 +11,22 @@
 #pragma once
 
 #include <cstdint>
+#include <vector>
 
+#include "rime/core/kernel.h"
 #include "rime/exec/memory.h"
 #include "rime/neighbors/grid_kernels.h"
 
 namespace rime::neighbors {
+
+/// Per-pair kernel values stored beside a neighbor list: for pair k = (i, j),
+/// w[k] = W(|x_i − x_j|) and grad[k] = ∇_i W(x_i − x_j).
+template <class T>
+struct PairKernelArrays {
+  CubicSpline<T> kernel;
+  exec::DeviceArray<T>& w;
+  exec::DeviceArray<Vec3<T>>& grad;
+};
 
 /// Compressed sparse rows: offsets has queries+1 entries.
 struct NeighborList {
@@ -58,9 +69,15 @@ class UniformGrid {
   /// share their cell lattice the search runs per query cell, looking up the 27 neighbor cells
   /// once for all points of the cell (several times faster on the CPU); identical lists either way.
   void QueryGrid(const UniformGrid& queries, T radius, bool exclude_self, NeighborList& out) const;
+  /// The same, also filling `values` for every pair. On the CPU the cell-by-cell search tests
+  /// 16 candidates at a time and computes the values in the same pass; lists and values are
+  /// bit-identical to QueryGrid followed by kernels::PairValues.
+  void QueryGrid(const UniformGrid& queries, T radius, bool exclude_self, NeighborList& out, const PairKernelArrays<T>& values) const;
 
  private:
   void BuildImpl(const Vec3<T>* points, Index n, T cell_size, const Vec3<T>* fixed_origin);
+  void CpuQueryByCell(const UniformGrid& queries, T radius, bool exclude_self, NeighborList& out, const PairKernelArrays<T>* values) const;
+  void BuildDenseCells();
 
   exec::Device device_;
   T cell_size_ = 0;
@@ -75,6 +92,7 @@ class UniformGrid {
   exec::DeviceArray<std::uint32_t> table_cells_;
   exec::DeviceArray<T> bounds_scratch_;
   mutable exec::DeviceArray<std::uint32_t> counts_;
+  std::vector<std::uint32_t> dense_cells_;  // CPU: GridView::dense_cells
 };
 
 extern template class UniformGrid<float>;

@@ -10,6 +10,7 @@
 #include <cstdint>
 
 #include "rime/core/hd.h"
+#include "rime/core/kernel.h"
 #include "rime/core/math.h"
 #include "rime/exec/atomic.h"
 
@@ -50,6 +51,18 @@ struct GridView {
   const std::uint32_t* sorted_index = nullptr; // sorted slot -> original point index
   const Vec3<T>* points = nullptr;             // original point positions
   std::uint32_t count = 0;
+  // CPU only, optional: the cell index of every lattice position of a box (kNoCell where empty),
+  // read instead of probing the hash table (neighbouring cells are neighbouring words).
+  const std::uint32_t* dense_cells = nullptr;
+  std::int64_t dense_lo[3] = {0, 0, 0}, dense_dims[3] = {0, 0, 0};
+  static constexpr std::uint32_t kNoCell = ~0u;
+
+  /// The cell at lattice coordinates (ix, iy, iz) from the dense box (kNoCell when empty or outside it).
+  RIME_HDI std::uint32_t DenseCell(std::int64_t ix, std::int64_t iy, std::int64_t iz) const {
+    ix -= dense_lo[0], iy -= dense_lo[1], iz -= dense_lo[2];
+    if (ix < 0 || iy < 0 || iz < 0 || ix >= dense_dims[0] || iy >= dense_dims[1] || iz >= dense_dims[2]) return kNoCell;
+    return dense_cells[(iz * dense_dims[1] + iy) * dense_dims[0] + ix];
+  }
 
   RIME_HDI std::int64_t CellCoord(T x, T o) const { return static_cast<std::int64_t>(std::floor((x - o) * inv_cell)); }
 
@@ -72,6 +85,11 @@ struct GridView {
           if (gx * gx + gy * gy + gz * gz >= r2max) continue;  // the whole cell is out of range
           const std::int64_t ix = cx + dx, iy = cy + dy, iz = cz + dz;
           if (ix < 0 || iy < 0 || iz < 0 || ix > kMaxCellsPerAxis || iy > kMaxCellsPerAxis || iz > kMaxCellsPerAxis) continue;
+          if (dense_cells) {
+            const std::uint32_t c = DenseCell(ix, iy, iz);
+            if (c != kNoCell) visit(cell_start[c], cell_start[c + 1]);
+            continue;
+          }
           const std::uint64_t key = MortonKey(ix, iy, iz);
           std::uint32_t slot = HashSlot(key, table_mask);
           while (true) {
@@ -213,6 +231,7 @@ template <class T>
 struct CellNeighborhood {
   std::uint32_t begin[27], end[27];
   int count = 0;
+  CellNeighborhood() = default;
   RIME_HDI CellNeighborhood(const GridView<T>& target, const GridView<T>& source, std::uint32_t cell) {
     const T size = T(1) / source.inv_cell;
     const Vec3<T> p = source.points[source.sorted_index[source.cell_start[cell]]];
@@ -282,6 +301,27 @@ struct FillNeighborsByCell {
   }
 };
 
+/// w and ∇W of every listed pair (i, j): r = xi[i] − xj[j].
+template <class T>
+struct PairValues {
+  const Vec3<T>* xi;
+  const Vec3<T>* xj;
+  const std::uint32_t* offsets;
+  const std::uint32_t* index;
+  CubicSpline<T> kernel;
+  T* w;
+  Vec3<T>* grad;
+  RIME_HD void operator()(Index i) const {
+    const Vec3<T> x = xi[i];
+    for (std::uint32_t k = offsets[i], e = offsets[i + 1]; k < e; ++k) {
+      const Vec3<T> r = x - xj[index[k]];
+      const T len = Norm(r);
+      w[k] = kernel.W(len);
+      grad[k] = r * kernel.GradientFactor(len);
+    }
+  }
+};
+
 /// Component-wise copy for bounding-box reductions: out[a*n + i] = -points[i][a] (a < 3) and
 /// points[i][a-3] (a >= 3), so one Max over each third gives -min and max.
 template <class T>
@@ -306,4 +346,5 @@ struct BoundsComponents {
   X(rime::neighbors::kernels::FillNeighbors<float>) X(rime::neighbors::kernels::FillNeighbors<double>)   \
   X(rime::neighbors::kernels::BoundsComponents<float>) X(rime::neighbors::kernels::BoundsComponents<double>)         \
   X(rime::neighbors::kernels::CountNeighborsByCell<float>) X(rime::neighbors::kernels::CountNeighborsByCell<double>) \
-  X(rime::neighbors::kernels::FillNeighborsByCell<float>) X(rime::neighbors::kernels::FillNeighborsByCell<double>)
+  X(rime::neighbors::kernels::FillNeighborsByCell<float>) X(rime::neighbors::kernels::FillNeighborsByCell<double>) \
+  X(rime::neighbors::kernels::PairValues<float>) X(rime::neighbors::kernels::PairValues<double>)

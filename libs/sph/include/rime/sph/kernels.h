@@ -42,27 +42,6 @@ struct RigidMotion {
 
 namespace kernels {
 
-/// w[k], grad[k] for every pair k of particle i (x_i from `xi`, neighbor from `xj`).
-template <class T>
-struct PairValues {
-  const Vec3<T>* xi;
-  const Vec3<T>* xj;
-  const std::uint32_t* offsets;
-  const std::uint32_t* index;
-  CubicSpline<T> kernel;
-  T* w;
-  Vec3<T>* grad;
-  RIME_HD void operator()(Index i) const {
-    const Vec3<T> x = xi[i];
-    for (std::uint32_t k = offsets[i], e = offsets[i + 1]; k < e; ++k) {
-      const Vec3<T> r = x - xj[index[k]];
-      const T len = Norm(r);
-      w[k] = kernel.W(len);
-      grad[k] = r * kernel.GradientFactor(len);
-    }
-  }
-};
-
 /// ρ_i = m W0 + Σ_j m W_ij + Σ_b Ψ_b W_ib  (spec §4); also the density error ρ_i − ρ0.
 template <class T>
 struct Density {
@@ -558,7 +537,7 @@ struct MarkListed {
 
 // Kernels of both precisions; Gather of the anisotropy (exec lists the other attribute types).
 #define RIME_SPH_KERNELS_T(X, T)                                                                                   \
-  X(rime::sph::kernels::PairValues<T>) X(rime::sph::kernels::Density<T>) X(rime::sph::kernels::Compression<T>) X(rime::sph::kernels::InitAcceleration<T>) \
+  X(rime::sph::kernels::Density<T>) X(rime::sph::kernels::Compression<T>) X(rime::sph::kernels::InitAcceleration<T>) \
   X(rime::sph::kernels::ViscosityAcceleration<T>) X(rime::sph::kernels::SurfaceColor<T>)                           \
   X(rime::sph::kernels::SurfaceEnergy<T>) X(rime::sph::kernels::SurfaceTensionAcceleration<T>)                     \
   X(rime::sph::kernels::AkinciNormal<T>) X(rime::sph::kernels::AkinciSurfaceTensionAcceleration<T>)                 \

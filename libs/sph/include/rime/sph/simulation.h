@@ -29,6 +29,9 @@ class Enclosure;
 /// Wall-clock seconds spent in each part of the step (accumulated).
 struct StepTimings {
   double neighbor_search = 0, non_pressure = 0, pressure_solve = 0, integration = 0, freezing = 0, other = 0;
+  // Parts of neighbor_search: binning and reordering the water; the water–water and the
+  // water–boundary lists, each with the kernel values and gradients stored per pair.
+  double grid_build = 0, fluid_lists = 0, boundary_lists = 0;
   double total() const { return neighbor_search + non_pressure + pressure_solve + integration + freezing + other; }
 };
 
