@@ -43,12 +43,8 @@ TEST(Examples, DefaultSceneIsProceduralAndFreezes) {
   for (const char* module : {"gravity", "viscosity", "surface_tension", "freezing"}) EXPECT_TRUE(scene.Enabled(module)) << module;
   // Small enough to bake in about two minutes on 2 cores: a few thousand particles, a few seconds.
   double water_volume = 0;
-  for (const auto& b : scene.fluid_blocks)
-    water_volume += b.shape == io::BlockShape::kBox ? (b.max.x - b.min.x) * (b.max.y - b.min.y) * (b.max.z - b.min.z) : 4.18879 * b.radius * b.radius * b.radius;
-  for (const auto& e : scene.emitters) {
-    const double area = e.shape == io::EmitterShape::kDisc ? 3.14159 * e.radius * e.radius : e.width * e.height;
-    water_volume += area * e.speed * (std::min(e.stop, scene.info.end_time) - e.start);
-  }
+  for (const auto& b : scene.fluid_blocks) water_volume += b.Volume();
+  for (const auto& e : scene.emitters) water_volume += e.EmittedVolume(scene.info.end_time);
   const double particles = water_volume / (scene.fluid.spacing * scene.fluid.spacing * scene.fluid.spacing);
   EXPECT_GT(particles, 500);
   EXPECT_LT(particles, 20000);

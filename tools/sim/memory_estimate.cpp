@@ -9,15 +9,8 @@ double ExpectedFluidParticles(const io::Scene& scene) {
   const double d = scene.fluid.spacing;
   const double cell = d * d * d;
   double count = 0;
-  for (const io::FluidBlock& b : scene.fluid_blocks) {
-    const Vec3d e = b.max - b.min;
-    count += (b.shape == io::BlockShape::kBox ? e.x * e.y * e.z : 4.0 / 3.0 * std::numbers::pi * b.radius * b.radius * b.radius) / cell;
-  }
-  for (const io::Emitter& e : scene.emitters) {
-    const double area = e.shape == io::EmitterShape::kDisc ? std::numbers::pi * e.radius * e.radius : e.width * e.height;
-    const double duration = std::max(0.0, std::min(e.stop, scene.info.end_time) - e.start);
-    count += area * e.speed * duration / cell;
-  }
+  for (const io::FluidBlock& b : scene.fluid_blocks) count += b.Volume() / cell;
+  for (const io::Emitter& e : scene.emitters) count += e.EmittedVolume(scene.info.end_time) / cell;
   return count;
 }
 

@@ -60,12 +60,7 @@ FluidBlock ParseBlock(TomlReader& t, double spacing) {
   LoadSettings(t, b);
   if (b.shape == BlockShape::kBox && (b.max.x <= b.min.x || b.max.y <= b.min.y || b.max.z <= b.min.z))
     t.Fail("max", "box max must exceed min on every axis");
-  if (b.shape == BlockShape::kBox) {
-    const Vec3d extent = b.max - b.min;
-    CheckParticleCount(t, "max", extent.x * extent.y * extent.z, spacing, "water block");
-  } else {
-    CheckParticleCount(t, "radius", 4.0 / 3.0 * std::numbers::pi * b.radius * b.radius * b.radius, spacing, "water block");
-  }
+  CheckParticleCount(t, b.shape == BlockShape::kBox ? "max" : "radius", b.Volume(), spacing, "water block");
   t.RejectUnknownKeys();
   return b;
 }
@@ -75,11 +70,7 @@ Emitter ParseEmitter(TomlReader& t, double spacing, double end_time) {
   LoadSettings(t, e);
   if (Norm(e.direction) == 0) t.Fail("direction", "emitter direction must not be zero");
   if (e.stop <= e.start) t.Fail("stop", "emitter stop time must be after its start time");
-  // Water emitted until the stop time or the end of the scene, whichever comes first.
-  const bool disc = e.shape == EmitterShape::kDisc;
-  const double area = disc ? std::numbers::pi * e.radius * e.radius : e.width * e.height;
-  const double duration = std::max(0.0, std::min(e.stop, end_time) - e.start);
-  CheckParticleCount(t, disc ? "radius" : "width", area * e.speed * duration, spacing, "emitter");
+  CheckParticleCount(t, e.shape == EmitterShape::kDisc ? "radius" : "width", e.EmittedVolume(end_time), spacing, "emitter");
   t.RejectUnknownKeys();
   return e;
 }

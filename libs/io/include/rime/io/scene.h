@@ -5,6 +5,7 @@
 /// (ranges, enum values, unknown keys) and throws rime::Error naming `file:line: field`.
 #pragma once
 
+#include <algorithm>
 #include <cstdint>
 #include <filesystem>
 #include <set>
@@ -402,6 +403,12 @@ struct FluidBlock {
   double radius = 0.1;
   Vec3d velocity{0, 0, 0};
 
+  /// m³ of water the block holds (the lattice fills about this much).
+  double Volume() const {
+    const Vec3d e = max - min;
+    return shape == BlockShape::kBox ? e.x * e.y * e.z : 4.0 / 3.0 * 3.14159265358979323846 * radius * radius * radius;
+  }
+
   template <class Self, class F>
   static void Visit(Self& s, F&& f) {
     f(Param{.name = "shape", .help = "a box, or a sphere"}, s.shape);
@@ -430,6 +437,12 @@ struct Emitter {
   double width = 0.1, height = 0.1;
   double speed = 1.0;
   double start = 0, stop = 1e30;
+
+  /// m³ of water emitted until its stop or the scene's end, whichever comes first.
+  double EmittedVolume(double end_time) const {
+    const double area = shape == EmitterShape::kDisc ? 3.14159265358979323846 * radius * radius : width * height;
+    return area * speed * std::max(0.0, std::min(stop, end_time) - start);
+  }
 
   template <class Self, class F>
   static void Visit(Self& s, F&& f) {
