@@ -1,5 +1,6 @@
 // The default example's ledge: water that runs over its lower end hangs there and freezes into
 // drips when air pressure holds it to the underside; without air pressure it falls off as a spray.
+// With tip_growth, water runs down the ice and freezes at its tip, so more ice hangs, and deeper.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -18,7 +19,7 @@ struct Drips {
   double deepest = 0;    // d_p below the ledge's lowest solid particle
 };
 
-Drips BakeAndMeasure(io::Scene scene) {
+Drips BakeAndMeasure(io::Scene scene, const char* variant) {
   sph::Simulation<float> sim(scene, exec::Device::Cpu());
   boundary::BoundarySettings settings;
   settings.particle_spacing = scene.fluid.spacing;
@@ -41,25 +42,44 @@ Drips BakeAndMeasure(io::Scene scene) {
     ++d.hanging;
     d.deepest = std::max(d.deepest, (ledge_bottom - x[i].z) / dp);
   }
-  std::printf("%s: %d ice particles hang below the ledge, the deepest %.1f d_p; %lld ice, %lld water\n",
-              scene.Enabled("air_pressure") ? "air pressure" : "no air pressure", d.hanging, d.deepest, (long long)sim.ice_count(),
+  std::printf("%s: %d ice particles hang below the ledge, the deepest %.1f d_p; %lld ice, %lld water\n", variant, d.hanging, d.deepest,
+              (long long)sim.ice_count(),
               (long long)sim.fluid_count());
   return d;
 }
 
+io::Scene DefaultScene() { return io::LoadScene(RIME_SOURCE_DIR "/examples/default.toml"); }
+
+// The shipped default, simulated once per process (ctest runs each test in a process of its own).
+const Drips& DefaultDrips() {
+  static const Drips drips = BakeAndMeasure(DefaultScene(), "default");
+  return drips;
+}
+
 TEST(IceLook, DripsFreezeUnderTheDefaultLedgeOnlyWithAirPressure) {
-  const io::Scene scene = io::LoadScene(RIME_SOURCE_DIR "/examples/default.toml");
+  const io::Scene scene = DefaultScene();
   ASSERT_TRUE(scene.Enabled("air_pressure"));
-  const Drips held = BakeAndMeasure(scene);
+  const Drips& held = DefaultDrips();
   // Bounds from four bakes of this ledge with nozzles placed differently: 7-32 hanging, 2.7-4.3 d_p.
   EXPECT_GE(held.hanging, 3);
   EXPECT_GE(held.deepest, 2.5);
 
   io::Scene without = scene;
   without.modules.erase("air_pressure");
-  const Drips fallen = BakeAndMeasure(without);
+  const Drips fallen = BakeAndMeasure(without, "no air pressure");
   EXPECT_LT(fallen.hanging, held.hanging);
   EXPECT_LE(fallen.hanging, 2);
+}
+
+TEST(IceLook, TipGrowthHangsMoreIceDeeperUnderTheDefaultLedge) {
+  const io::Scene scene = DefaultScene();
+  ASSERT_GT(scene.freezing.tip_growth, 1.0);
+  const Drips& tip = DefaultDrips();
+  io::Scene paper = scene;
+  paper.freezing.tip_growth = 1;
+  const Drips sides = BakeAndMeasure(paper, "tip_growth 1");
+  EXPECT_GT(tip.hanging, 2 * sides.hanging);
+  EXPECT_GT(tip.deepest, sides.deepest + 1.0);
 }
 
 }  // namespace

@@ -1,6 +1,7 @@
 // rime-inspect: measures what a bake's ice looks like, frame by frame (docs/ice-metrics.md):
 // specks, particle-scale noise, topology, glaze coverage and thickness, icicles.
 // Thin: find a bake's particle frames and cleaned meshes, run meshfix::MeasureIce, print a table, write JSON.
+#include <algorithm>
 #include <filesystem>
 #include <regex>
 
@@ -110,6 +111,14 @@ int main(int argc, char** argv) {
     for (std::int64_t f : frames) {
       const io::ParticleFrame frame = io::ReadParticleFrame(io::FramePath(sim, "particles", f, "h5part"), "particles");
       const fs::path mesh_file = io::FramePath(meshes, stem, f, "obj");
+      if (!fs::exists(mesh_file)) {
+        // A frame without ice may have no mesh; one with ice and no mesh is not cleaned yet and would read as "no ice".
+        const auto& phase = frame.Get<std::uint8_t>("phase");
+        if (std::count(phase.begin(), phase.end(), std::uint8_t(io::Phase::kIce)) > 0) {
+          log::Warn("frame {}: {} is missing (not cleaned yet?); frame skipped", f, mesh_file.string());
+          continue;
+        }
+      }
       const io::TriMesh mesh = fs::exists(mesh_file) ? io::ReadMesh(mesh_file) : io::TriMesh{};
       const meshfix::IceMetrics m = meshfix::MeasureIce(mesh, frame, scene.solver.gravity, objects, settings);
       fmt::print("{:>5} {:>6} {:>6} {:>6} {:>6} {:>5} {:>7.2f} {:>6.3f} {:>6.3f} {:>6.2f} {:>4.2f}±{:<4.2f} {:>7} {:>7} {:>6.1f} {:>6.1f}\n",
@@ -122,7 +131,7 @@ int main(int argc, char** argv) {
                                 {"spacing", scene.fluid.spacing}, {"meshes", meshes.string()}, {"frames", rows}};
     const fs::path json_path = json_file.empty() ? out / "inspect.json" : fs::path(json_file);
     WriteFileAtomically(json_path, doc.dump(1) + "\n");
-    log::Info("metrics of {} frames written to {}", frames.size(), json_path.string());
+    log::Info("metrics of {} frames written to {}", rows.size(), json_path.string());
     tool::WriteSummary(common, doc);
     return 0;
   });

@@ -25,6 +25,7 @@ FreezeParams<T> MakeFreezeParams(const io::Scene& scene) {
   p.icicle_threshold = T(f.icicle_threshold);
   p.growth_sign = T(f.growth_sign);
   p.gravity_growth = T(f.gravity_growth);
+  p.tip_growth = T(f.tip_growth);
   const double g = Norm(scene.solver.gravity);
   p.gravity_dir = g > 0 && scene.Enabled("gravity") ? Vec3<T>(scene.solver.gravity / g) : Vec3<T>{};
   p.fr_clamp = f.fr_mode == io::FrMode::kClamp;

@@ -137,6 +137,22 @@ TEST(FreezeKernels, GravityGrowthFavoursWaterBelowIce) {
   EXPECT_NEAR(kernels::FreezingFraction(-1.0 * sideways_flow, true, water_below, p, true), below, 1e-12);
 }
 
+// tip_growth raises fr on ice to a power: water straight below the tip keeps fr = 1, water beside
+// an icicle (60° off the growth direction) drops from 1/2 to 1/2^n; glaze on solids is unchanged.
+TEST(FreezeKernels, TipGrowthFavoursWaterBelowTheTip) {
+  FreezeParams<double> p = Params();
+  p.growth_sign = -1;
+  p.fr_clamp = true;
+  const Vec3d downward_flow{0, 0, -1};
+  const Vec3d below_tip{0, 0, 0.01};                                    // x_b − x_j: water under b
+  const Vec3d beside{0.01 * std::sin(M_PI / 3), 0, 0.01 * std::cos(M_PI / 3)};  // 60° off the vertical
+  EXPECT_NEAR(kernels::FreezingFraction(downward_flow, true, beside, p, true), 0.5, 1e-12) << "n = 1 is Eq. 31";
+  p.tip_growth = 4;
+  EXPECT_NEAR(kernels::FreezingFraction(downward_flow, true, below_tip, p, true), 1.0, 1e-12);
+  EXPECT_NEAR(kernels::FreezingFraction(downward_flow, true, beside, p, true), 1.0 / 16, 1e-12);
+  EXPECT_NEAR(kernels::FreezingFraction(downward_flow, true, beside, p, false), 0.5, 1e-12) << "glaze on solids ignores tip_growth";
+}
+
 TEST(FreezeKernels, FreezingFractionAndEnergy) {
   const FreezeParams<double> p = Params();
   std::mt19937 rng(5);

@@ -36,6 +36,7 @@ struct FreezeParams {
   T glaze_threshold, icicle_threshold;
   T growth_sign;               // +1 paper, −1 flipped
   T gravity_growth;            // weight of gravity's direction added to the flow's (0: Eq. 26 alone)
+  T tip_growth = T(1);         // power of fr on ice (1: Eq. 31 alone)
   Vec3<T> gravity_dir;         // unit vector along gravity (zero without gravity)
   bool fr_clamp;               // fr_mode = "clamp"
   bool ce_raw;                 // ce_mode = "raw" (kg/m³) instead of dimensionless
@@ -324,6 +325,7 @@ struct DryFilm {
 /// On ice, `gravity_growth` w > 0 turns the direction into ĝv + w ĝ (ĝ along gravity, in the sense
 /// that grows ice downwards), so water dripping below ice freezes onto it first: the paper's "ice
 /// grows faster, mainly vertically, due to gravity" (icicles). Glaze on solids keeps Eq. 26 alone.
+/// On ice, fr is raised to `tip_growth`: water beside an icicle freezes less than water below its tip.
 template <class T>
 RIME_HDI T FreezingFraction(const Vec3<T>& growth, bool valid, const Vec3<T>& x_isf, const FreezeParams<T>& p, bool on_ice = false) {
   const T len = Norm(x_isf);
@@ -338,8 +340,8 @@ RIME_HDI T FreezingFraction(const Vec3<T>& growth, bool valid, const Vec3<T>& x_
   const T g = Norm(direction);
   if (!has_direction || len < T(1e-6) * p.h || !(g > T(0))) return T(0.5);
   const T dot = p.growth_sign * Dot(direction, x_isf) / (g * len);
-  if (p.fr_clamp) return dot > T(0) ? dot : T(0);
-  return (dot + T(1)) * T(0.5);
+  const T fr = p.fr_clamp ? (dot > T(0) ? dot : T(0)) : (dot + T(1)) * T(0.5);
+  return on_ice && p.tip_growth != T(1) ? std::pow(fr, p.tip_growth) : fr;
 }
 
 /// Phase-shift decision (spec §9.6–9.7) for fluid j: the nucleation energy of every boundary

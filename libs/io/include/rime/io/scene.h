@@ -253,6 +253,9 @@ struct FreezingSettings {
   // Weight of gravity's direction added to the flow's growth direction: ice grows downwards too,
   // so water dripping off ice freezes onto it (docs/physics.md "Freezing fraction").
   double gravity_growth = 0;
+  // Power of the freezing fraction of water meeting ice: above 1, water beside an icicle runs on and
+  // freezes below its tip, so icicles grow long and slender (docs/physics.md "Freezing fraction").
+  double tip_growth = 1;
   FrMode fr_mode = FrMode::kClamp;
   CeMode ce_mode = CeMode::kDimensionless;
   CeAggregation ce_aggregation = CeAggregation::kMax;
@@ -289,6 +292,10 @@ struct FreezingSettings {
             .doc = "so water below ice freezes onto it first and water arriving from above does not pile up into a mound; "
                    "glaze on solids is unaffected. 0 is the paper's Eq. 26 alone "
                    "([physics.md](physics.md#freezing-fraction-eq-31))"}, s.gravity_growth);
+    f(Param{.name = "tip_growth", .range = Range::Closed(1, 16),
+            .help = "*Longer icicles*: power of the freezing fraction of water meeting ice, so water beside an icicle",
+            .doc = "runs down and freezes below its tip instead of thickening its sides; 1 is the paper's Eq. 31 "
+                   "([physics.md](physics.md#freezing-fraction-eq-31))"}, s.tip_growth);
     f(Param{.name = "fr_mode", .help = "clamp: max(0, dot), no growth where the flow points away (the paper's text);",
             .doc = "map: (dot+1)/2 as printed"}, s.fr_mode);
     f(Param{.name = "ce_mode", .help = "raw for the literal kg/m³ nucleation energy"}, s.ce_mode);
