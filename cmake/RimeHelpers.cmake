@@ -8,6 +8,10 @@ function(rime_target_defaults target)
     $<$<COMPILE_LANGUAGE:CUDA>:--expt-relaxed-constexpr --extended-lambda -Xcudafe --diag_suppress=20012>)
 endfunction()
 
+# Per-test limit in seconds; the sanitizer preset raises it, since its builds run an order of
+# magnitude slower.
+set(RIME_TEST_TIMEOUT 900 CACHE STRING "CTest TIMEOUT of each GoogleTest case")
+
 # rime_add_test(NAME SOURCES ... LIBS ... [LABELS ...] [PROPERTIES ...]): one GoogleTest executable
 # registered with CTest; LABELS and PROPERTIES (single-valued, e.g. RESOURCE_LOCK) apply to each test.
 function(rime_add_test name)
@@ -22,7 +26,7 @@ function(rime_add_test name)
     RIME_SHARED_DIR="${PROJECT_SOURCE_DIR}/../shared"
     RIME_BINARY_DIR="${PROJECT_BINARY_DIR}")
   rime_target_defaults(${name})
-  gtest_discover_tests(${name} DISCOVERY_TIMEOUT 60 TEST_LIST ${name}_TESTS PROPERTIES TIMEOUT 900 ${ARG_PROPERTIES})
+  gtest_discover_tests(${name} DISCOVERY_TIMEOUT 60 TEST_LIST ${name}_TESTS PROPERTIES TIMEOUT ${RIME_TEST_TIMEOUT} ${ARG_PROPERTIES})
   if(ARG_LABELS)
     # gtest_discover_tests flattens list-valued properties; set the labels once the tests are known.
     set(labels_file ${CMAKE_CURRENT_BINARY_DIR}/${name}_labels.cmake)

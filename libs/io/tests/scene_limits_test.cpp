@@ -1,7 +1,7 @@
 // Hostile scene values: each is refused at load time, naming file:line: field, in bounded time.
 #include <gtest/gtest.h>
 
-#include <chrono>
+#include <ctime>
 #include <filesystem>
 #include <fstream>
 #include <string>
@@ -18,9 +18,10 @@ namespace {
   return ::testing::AssertionFailure() << "'" << part << "' not in: " << message.substr(0, 300);
 }
 
-// The error message of parsing `text`, which must come within a second.
+// The error message of parsing `text`, which must come within a second of processor time: the
+// parser's work is bounded, while wall time also counts whatever else the loaded machine runs.
 std::string Refusal(const std::string& text) {
-  const auto start = std::chrono::steady_clock::now();
+  const std::clock_t start = std::clock();
   std::string message;
   try {
     ParseScene(text, "hostile.toml");
@@ -29,7 +30,7 @@ std::string Refusal(const std::string& text) {
     EXPECT_EQ(e.code(), ExitCode::kBadInput);
     message = e.what();
   }
-  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  const double seconds = double(std::clock() - start) / CLOCKS_PER_SEC;
   EXPECT_LT(seconds, 1.0) << message;
   return message;
 }
