@@ -1,5 +1,5 @@
 // rime-bake's decisions (what is stale, what runs, what it reports), tested by running the real
-// rime-bake binary on fake stage tools (fake_tools.h) that log every invocation.
+// rime-bake binary on fake stage tools (rime/test/fake_tools.h) that log every invocation.
 #include <cstdlib>
 #include <gtest/gtest.h>
 #include <signal.h>
@@ -19,8 +19,8 @@
 #include <sstream>
 #include <thread>
 
-#include "bake_outputs.h"
-#include "fake_tools.h"
+#include "rime/test/bake_outputs.h"
+#include "rime/test/fake_tools.h"
 #include "farm.h"
 #include "rime/core/error.h"
 #include "rime/io/scene.h"
@@ -31,17 +31,11 @@ extern char** environ;
 namespace rime::bake {
 namespace {
 
-constexpr int kLastFrame = testing::kFakeLastFrame;
-const char* const kScene = testing::kFakeScene;
+constexpr int kLastFrame = test::kFakeLastFrame;
+const char* const kScene = test::kFakeScene;
 
-std::string ReadFile(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  std::stringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
-
-void WriteFile(const fs::path& p, const std::string& text) { std::ofstream(p, std::ios::binary) << text; }
+using test::ReadFile;
+using test::WriteFile;
 
 class Bake : public ::testing::Test {
  protected:
@@ -50,7 +44,7 @@ class Bake : public ::testing::Test {
     root_ = fs::temp_directory_path() / (std::string("rime_bake_test_") + info->name() + "_" + std::to_string(getpid()));
     fs::remove_all(root_);
     fs::create_directories(root_);
-    testing::WriteFakeTools(root_ / "tools");
+    test::WriteFakeTools(root_ / "tools");
     scene_ = root_ / "scene.toml";
     WriteFile(scene_, kScene);
     setenv("FAKE_LOG", (root_ / "invocations.log").c_str(), 1);
@@ -66,7 +60,7 @@ class Bake : public ::testing::Test {
   }
   /// Puts a fake blender and ffmpeg first on PATH (until TearDown) and lets rime-bake use them.
   void UseFakePreviewTools() {
-    testing::WriteFakePreviewTools(root_ / "preview_tools");
+    test::WriteFakePreviewTools(root_ / "preview_tools");
     saved_path_ = getenv("PATH");
     setenv("PATH", ((root_ / "preview_tools").string() + ":" + saved_path_).c_str(), 1);
     unsetenv("RIME_BLENDER");

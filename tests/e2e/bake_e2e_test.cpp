@@ -19,7 +19,8 @@
 #include "rime/core/error.h"
 #include "rime/io/particles.h"
 #include "rime/io/scene.h"
-#include "small_bake_scene.h"
+#include "rime/test/files.h"
+#include "rime/test/small_bake_scene.h"
 
 namespace fs = std::filesystem;
 extern char** environ;
@@ -30,12 +31,7 @@ namespace {
 constexpr int kLastFrame = 10;
 const std::string kScene = test::SmallBakeScene("e2e", kLastFrame);
 
-std::string ReadFile(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  std::stringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
+using test::ReadFile;
 
 class BakeEndToEnd : public ::testing::Test {
  protected:

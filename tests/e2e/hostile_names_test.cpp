@@ -7,9 +7,9 @@
 #include <filesystem>
 #include <fmt/format.h>
 
-#include "bake_outputs.h"
+#include "rime/test/bake_outputs.h"
 #include "rime/io/particles.h"
-#include "small_bake_scene.h"
+#include "rime/test/small_bake_scene.h"
 
 namespace fs = std::filesystem;
 

@@ -14,9 +14,9 @@
 #include <set>
 #include <sys/stat.h>
 
-#include "bake_outputs.h"
+#include "rime/test/bake_outputs.h"
 #include "rime/io/particles.h"
-#include "small_bake_scene.h"
+#include "rime/test/small_bake_scene.h"
 
 namespace fs = std::filesystem;
 using Clock = std::chrono::steady_clock;

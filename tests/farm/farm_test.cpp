@@ -1,4 +1,4 @@
-// rime-bake --farm on a real single-node Slurm cluster on localhost (local_slurm.h): a farm bake
+// rime-bake --farm on a real single-node Slurm cluster on localhost (rime/test/local_slurm.h): a farm bake
 // writes the same bytes as a local bake (reports: the same apart from timings) and leaves a state both agree is up to date; a failed frame
 // is reported with its log and resubmitted alone; a cancelled bake leaves no job and nothing that
 // looks finished. The settings and --dry-run checks need no cluster.
@@ -18,10 +18,10 @@
 #include <sstream>
 #include <thread>
 
-#include "bake_outputs.h"
-#include "fake_tools.h"
-#include "local_slurm.h"
-#include "small_bake_scene.h"
+#include "rime/test/bake_outputs.h"
+#include "rime/test/fake_tools.h"
+#include "rime/test/local_slurm.h"
+#include "rime/test/small_bake_scene.h"
 
 namespace fs = std::filesystem;
 using nlohmann::json;
@@ -31,8 +31,8 @@ namespace {
 
 const std::string kRealScene = test::SmallBakeScene("farm", 5);
 
-using bake::testing::kFakeLastFrame;
-using bake::testing::kFakeScene;
+using test::kFakeLastFrame;
+using test::kFakeScene;
 
 constexpr auto kFarmTimeout = std::chrono::seconds(150);
 
@@ -41,7 +41,7 @@ using test::ReadFile;
 
 class Farm : public ::testing::Test {
  protected:
-  static inline testing::LocalSlurm* cluster_ = nullptr;
+  static inline test::LocalSlurm* cluster_ = nullptr;
   static inline std::string cluster_problem_;
 
   static void TearDownTestSuite() {
@@ -56,7 +56,7 @@ class Farm : public ::testing::Test {
     root_ = fs::temp_directory_path() / fmt::format("rime_farm_{}_{}", ::testing::UnitTest::GetInstance()->current_test_info()->name(), getpid());
     fs::remove_all(root_);
     fs::create_directories(root_);
-    bake::testing::WriteFakeTools(root_ / "tools");
+    test::WriteFakeTools(root_ / "tools");
     std::ofstream(root_ / "real.toml") << kRealScene;
     std::ofstream(root_ / "fake.toml") << kFakeScene;
     // Two frames per array task; the simulation takes one CPU so a surface task can run beside it,
@@ -77,11 +77,11 @@ class Farm : public ::testing::Test {
   /// Starts the cluster once for the whole suite; the caller skips when Slurm is not installed.
   static bool ClusterUp() {
     if (cluster_) return true;
-    if (const auto missing = testing::LocalSlurm::MissingBinary()) {
+    if (const auto missing = test::LocalSlurm::MissingBinary()) {
       cluster_problem_ = fmt::format("Slurm is not installed ({} not found; Debian: apt install slurm-wlm)", *missing);
       return false;
     }
-    cluster_ = new testing::LocalSlurm;
+    cluster_ = new test::LocalSlurm;
     const std::string problem = cluster_->Start(ClusterFolder());
     if (!problem.empty()) {
       delete cluster_;
@@ -117,7 +117,7 @@ class Farm : public ::testing::Test {
       std::this_thread::sleep_for(std::chrono::seconds(1));
     }
     ADD_FAILURE() << "the farm bake did not finish within " << kFarmTimeout.count() << " s:\n"
-                  << output_ << testing::LocalSlurm::Capture("squeue 2>&1");
+                  << output_ << test::LocalSlurm::Capture("squeue 2>&1");
     return summary_;
   }
 
@@ -371,7 +371,7 @@ TEST_F(Farm, FailedFrameIsReportedWithItsLogAndResubmittedAlone) {
 // movie job after the whole array (fake Blender and ffmpeg).
 TEST_F(Farm, PreviewFramesAndMovieRunOnTheFarm) {
   if (!ClusterUp()) GTEST_SKIP() << cluster_problem_;
-  bake::testing::WriteFakePreviewTools(root_ / "preview_tools");
+  test::WriteFakePreviewTools(root_ / "preview_tools");
   const std::string path = std::getenv("PATH");
   setenv("PATH", ((root_ / "preview_tools").string() + ":" + path).c_str(), 1);
   const int code = RunBake("fake.toml", root_ / "out", "all --farm slurm --farm-config " + (root_ / "site.toml").string(), true);
@@ -401,12 +401,12 @@ TEST_F(Farm, CancelLeavesNoJobAndNothingThatLooksFinished) {
   const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
   while (!fs::exists(root_ / "out/cache/sim/particles.0001.h5part") && std::chrono::steady_clock::now() < deadline)
     std::this_thread::sleep_for(std::chrono::milliseconds(100));
-  ASSERT_TRUE(fs::exists(root_ / "out/cache/sim/particles.0001.h5part")) << testing::LocalSlurm::Capture("squeue 2>&1");
+  ASSERT_TRUE(fs::exists(root_ / "out/cache/sim/particles.0001.h5part")) << test::LocalSlurm::Capture("squeue 2>&1");
   EXPECT_EQ(RunBake("fake.toml", root_ / "out", "cleanup", true), 5) << output_;  // a local bake refuses meanwhile
   EXPECT_NE(output_.find("--farm cancel"), std::string::npos) << output_;
   ASSERT_EQ(RunBake("fake.toml", root_ / "out", farm + " --farm cancel", true), 0) << output_;
   EXPECT_FALSE(summary_["cancelled"].empty()) << output_;
-  const std::string queue = testing::LocalSlurm::Capture("squeue --noheader --format=%i 2>&1");
+  const std::string queue = test::LocalSlurm::Capture("squeue --noheader --format=%i 2>&1");
   for (const auto& id : ours) EXPECT_EQ(queue.find(id), std::string::npos) << "job " << id << " is still in the queue:\n" << queue;
 
   // Nothing the cancelled tasks left may pass as finished: the status shows nothing done after the

@@ -39,6 +39,7 @@
 #include "rime/sph/simulation.h"
 #include "rime/surface/frame_input.h"
 #include "rime/surface/reconstruct.h"
+#include "rime/test/measure.h"
 
 namespace fs = std::filesystem;
 
@@ -530,12 +531,6 @@ void SurfacePicture(const Result& r, const fs::path& path) {
   WritePanels(path, img);
 }
 
-std::string LoadAverage() {
-  std::ifstream f("/proc/loadavg");
-  std::string a, b, c;
-  f >> a >> b >> c;
-  return a + " " + b + " " + c;
-}
 
 // One result's measures in the JSON's order, each written once for both files: CSV columns are
 // the ones not marked json_only, in the same order; text values are quoted in the JSON.
@@ -600,7 +595,7 @@ int main(int argc, char** argv) {
   rime::log::SetLevel(rime::log::Level::kWarning);
   fs::create_directories(out);
   const std::string run_info = fmt::format("{} variant; {} hardware threads; load average at start {}", full ? "full" : "fast",
-                                           std::thread::hardware_concurrency(), LoadAverage());
+                                           std::thread::hardware_concurrency(), rime::test::LoadAverages());
   std::printf("Rime vs Im et al. 2013 baseline (%s)\n", run_info.c_str());
   std::vector<Result> results;
   for (const std::string& s : scenes)
@@ -643,7 +638,7 @@ int main(int argc, char** argv) {
   std::ofstream(out / "results.json") << json;
   bool ok = true;
   for (const Result& r : results) ok = ok && r.ok && r.finite && r.ice + r.fluid_end + r.removed == r.water_initial;
-  std::printf("\nload average at end %s; %s\n", LoadAverage().c_str(),
+  std::printf("\nload average at end %s; %s\n", rime::test::LoadAverages().c_str(),
               ok ? "every run finished, finite, water + ice + removed = initial water" : "SOME RUN FAILED (see above)");
   return ok ? 0 : 1;
 }

@@ -18,28 +18,18 @@
 #include "rime/io/mesh.h"
 #include "rime/meshfix/clean.h"
 #include "rime/meshfix/procedural.h"
+#include "rime/test/measure.h"
 
 using namespace rime;
 namespace fs = std::filesystem;
 
 namespace {
-double Median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  return v.empty() ? 0 : (v.size() % 2 ? v[v.size() / 2] : 0.5 * (v[v.size() / 2 - 1] + v[v.size() / 2]));
-}
 /// CPU time of the whole process: on a machine shared with other work, wall time overstates the
 /// cost; CPU time divided by threads is the per-core figure.
 double ProcessCpuSeconds() {
   timespec t{};
   clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t);
   return double(t.tv_sec) + 1e-9 * double(t.tv_nsec);
-}
-double Seconds(std::chrono::steady_clock::time_point since) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count();
-}
-double LoadAverage() {
-  double load[1] = {-1};
-  return getloadavg(load, 1) == 1 ? load[0] : -1;
 }
 /// Largest and mean distance from the vertices and face centroids of `from` to the surface of
 /// `to` (TransferVelocities with velocity = position returns the nearest surface point).
@@ -101,47 +91,47 @@ int main(int argc, char** argv) {
       io::TriMesh last_mesh;
       std::vector<double> load;
       for (int r = 0; r < runs; ++r) {
-        auto t = std::chrono::steady_clock::now();
+        test::Stopwatch watch;
         io::WriteMesh(file, mesh);
-        write_s.push_back(Seconds(t));
-        t = std::chrono::steady_clock::now();
+        write_s.push_back(watch.seconds());
+        watch.Restart();
         const io::TriMesh read = io::ReadMesh(file);
-        read_s.push_back(Seconds(t));
-        t = std::chrono::steady_clock::now();
+        read_s.push_back(watch.seconds());
+        watch.Restart();
         io::WriteMesh(obj_file, mesh);
-        write_obj_s.push_back(Seconds(t));
-        t = std::chrono::steady_clock::now();
+        write_obj_s.push_back(watch.seconds());
+        watch.Restart();
         if (io::ReadMesh(obj_file).triangle_count() != mesh.triangle_count()) throw std::runtime_error("OBJ round trip lost faces");
-        read_obj_s.push_back(Seconds(t));
+        read_obj_s.push_back(watch.seconds());
         fs::remove(obj_file);
-        t = std::chrono::steady_clock::now();
+        watch.Restart();
         const double cpu0 = ProcessCpuSeconds();
         meshfix::CleanResult result = meshfix::Clean(read, settings);
-        clean_s.push_back(Seconds(t));
+        clean_s.push_back(watch.seconds());
         cpu_s.push_back(ProcessCpuSeconds() - cpu0);
         for (const auto& op : result.report.operations) {
           per_op[op.name].push_back(op.seconds);
           per_op_cpu[op.name].push_back(op.cpu_seconds);
         }
-        load.push_back(LoadAverage());
+        load.push_back(test::LoadAverage());
         last = std::move(result.report);
         last_mesh = std::move(result.mesh);
       }
       if (!keep) fs::remove(file);
-      const double clean = Median(clean_s);
+      const double clean = test::Median(clean_s);
       const double rate = double(last.before.faces) / clean;
-      const double cpu = Median(cpu_s);
+      const double cpu = test::Median(cpu_s);
       const double rate_per_core_cpu = double(last.before.faces) / cpu;
       std::string ops;
       nlohmann::json op_json, op_cpu_json;
       for (const auto& op : last.operations) {
-        const double m = Median(per_op_cpu[op.name]);
+        const double m = test::Median(per_op_cpu[op.name]);
         ops += fmt::format(" {} {:.2f}", op.name, m);
-        op_json[op.name] = Median(per_op[op.name]);
+        op_json[op.name] = test::Median(per_op[op.name]);
         op_cpu_json[op.name] = m;
       }
       fmt::print("{:>6} {:>9} {:>9} {:>7.2f} {:>7.2f} {:>8.2f} {:>8.2f} {:>8.0f} {:>12.0f} {}\n", shape, last.before.faces,
-                 last.after.faces, Median(read_s), Median(write_s), clean, cpu, rate / 1e3, rate_per_core_cpu / 1e3, ops);
+                 last.after.faces, test::Median(read_s), test::Median(write_s), clean, cpu, rate / 1e3, rate_per_core_cpu / 1e3, ops);
       fmt::print("{:>6} {}\n", "", meshfix::SummaryLine(last));
       nlohmann::json distance;
       if (hausdorff) {
@@ -155,18 +145,18 @@ int main(int argc, char** argv) {
         fmt::print("{:>6} Hausdorff {:.3g} m = {:.4f} mean input edges, mean distance {:.3g} m\n", "", h,
                    h / last.before.mean_edge_length, 0.5 * (in_out_mean + out_in_mean));
       }
-      fmt::print("{:>6} OBJ read {:.2f} s, write {:.2f} s; binary PLY read {:.2f} s, write {:.2f} s\n", "", Median(read_obj_s),
-                 Median(write_obj_s), Median(read_s), Median(write_s));
+      fmt::print("{:>6} OBJ read {:.2f} s, write {:.2f} s; binary PLY read {:.2f} s, write {:.2f} s\n", "", test::Median(read_obj_s),
+                 test::Median(write_obj_s), test::Median(read_s), test::Median(write_s));
       std::fflush(stdout);
       results.push_back({{"shape", shape},
                          {"triangles_in", last.before.faces},
                          {"triangles_out", last.after.faces},
                          {"threads", threads},
                          {"runs", runs},
-                         {"read_ply_seconds", Median(read_s)},
-                         {"write_ply_seconds", Median(write_s)},
-                         {"read_obj_seconds", Median(read_obj_s)},
-                         {"write_obj_seconds", Median(write_obj_s)},
+                         {"read_ply_seconds", test::Median(read_s)},
+                         {"write_ply_seconds", test::Median(write_s)},
+                         {"read_obj_seconds", test::Median(read_obj_s)},
+                         {"write_obj_seconds", test::Median(write_obj_s)},
                          {"clean_seconds", clean},
                          {"input_triangles_per_second", rate},
                          {"input_triangles_per_second_per_core", rate / threads},
@@ -174,7 +164,7 @@ int main(int argc, char** argv) {
                          {"input_triangles_per_cpu_second", rate_per_core_cpu},
                          {"operations_seconds", op_json},
                          {"operations_cpu_seconds", op_cpu_json},
-                         {"load_average_1min", Median(load)},
+                         {"load_average_1min", test::Median(load)},
                          {"distance", distance},
                          {"report", meshfix::ToJson(last)}});
     }

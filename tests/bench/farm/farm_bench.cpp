@@ -1,5 +1,5 @@
 // What a farm task costs: bakes a 60-frame scene locally (rime-bake -j 1) and through
-// `rime-bake --farm slurm` on a single-node Slurm cluster on localhost (tests/farm/local_slurm.h),
+// `rime-bake --farm slurm` on a single-node Slurm cluster on localhost (rime/test/local_slurm.h),
 // then prints both wall times and, per Slurm task, the wait from submission to start and the time
 // from start to end beside the stage tools' own time (the rest is the task's overhead).
 //   rime-bench-farm [--frames N] [--chunk C] [--json FILE] [--keep]
@@ -19,9 +19,11 @@
 #include <sstream>
 #include <thread>
 
-#include "local_slurm.h"
+#include "rime/test/files.h"
+#include "rime/test/local_slurm.h"
+#include "rime/test/measure.h"
 
-#include "small_bake_scene.h"
+#include "rime/test/small_bake_scene.h"
 
 namespace fs = std::filesystem;
 using nlohmann::json;
@@ -31,19 +33,12 @@ namespace {
 
 std::string Scene(int frames) { return rime::test::SmallBakeScene("farm_bench", frames - 1); }
 
-std::string ReadFile(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  std::stringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
+using rime::test::ReadFile;
 
 int Run(const std::string& command) {
   const int status = std::system(command.c_str());
   return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
 }
-
-double Seconds(Clock::time_point a, Clock::time_point b) { return std::chrono::duration<double>(b - a).count(); }
 
 struct Stats {
   double mean = 0, median = 0, max = 0;
@@ -54,7 +49,7 @@ Stats Summarize(std::vector<double> v) {
   if (v.empty()) return s;
   std::sort(v.begin(), v.end());
   for (double x : v) s.mean += x / v.size();
-  s.median = v[v.size() / 2];
+  s.median = rime::test::Median(v);
   s.max = v.back();
   s.count = v.size();
   return s;
@@ -74,7 +69,7 @@ int main(int argc, char** argv) {
   app.add_flag("--keep", keep, "Keep the temporary folder (outputs, logs, the cluster's logs)");
   CLI11_PARSE(app, argc, argv);
 
-  if (const auto missing = rime::testing::LocalSlurm::MissingBinary()) {
+  if (const auto missing = rime::test::LocalSlurm::MissingBinary()) {
     std::fprintf(stderr, "rime-bench-farm: Slurm is not installed (%s not found; Debian: apt install slurm-wlm)\n", missing->c_str());
     return 2;
   }
@@ -89,29 +84,29 @@ int main(int argc, char** argv) {
   };
 
   // 1. Local, one frame at a time.
-  const auto local_start = Clock::now();
+  const rime::test::Stopwatch local_watch;
   if (Run(command("local", "-j 1 --json-summary " + (root / "local.json").string())) != 0) {
     std::fprintf(stderr, "local bake failed:\n%s", ReadFile(root / "bake.txt").c_str());
     return 1;
   }
-  const double local_wall = Seconds(local_start, Clock::now());
+  const double local_wall = local_watch.seconds();
   const json local = json::parse(ReadFile(root / "local.json"));
 
   // 2. The same bake through the localhost cluster, from submission until --farm status shows
   // nothing queued or running.
-  rime::testing::LocalSlurm cluster;
+  rime::test::LocalSlurm cluster;
   if (const std::string problem = cluster.Start(root / "slurm"); !problem.empty()) {
     std::fprintf(stderr, "cannot start the localhost Slurm cluster: %s\n", problem.c_str());
     return 1;
   }
   const std::string site = "--farm-config " + (root / "site.toml").string();
-  const auto farm_start = Clock::now();
+  const rime::test::Stopwatch farm_watch;
   const double submit_epoch = std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
   if (Run(command("farm", site + " --farm slurm --json-summary " + (root / "submit.json").string())) != 0) {
     std::fprintf(stderr, "submission failed:\n%s", ReadFile(root / "bake.txt").c_str());
     return 1;
   }
-  const double submit_seconds = Seconds(farm_start, Clock::now());
+  const double submit_seconds = farm_watch.seconds();
   json status;
   for (const auto deadline = Clock::now() + std::chrono::minutes(15);;) {
     Run(command("farm", site + " --farm status --json-summary " + (root / "status.json").string()));
@@ -126,7 +121,7 @@ int main(int argc, char** argv) {
     }
     std::this_thread::sleep_for(std::chrono::milliseconds(250));
   }
-  const double farm_wall = Seconds(farm_start, Clock::now());
+  const double farm_wall = farm_watch.seconds();
   int failed = 0;
   for (const auto& [stage, counts] : status["stages"].items()) failed += counts["failed"].get<int>() + counts["missing"].get<int>();
 

@@ -13,6 +13,7 @@
 #include "rime/io/particles.h"
 #include "rime/meshfix/procedural.h"
 #include "rime/meshfix/quality.h"
+#include "rime/test/files.h"
 
 namespace rime {
 namespace {
@@ -29,10 +30,7 @@ ToolRun Clean(const std::string& args, const fs::path& dir) {
   const fs::path err = dir / "stderr.txt";
   const std::string command = kTool.string() + " -q " + args + " 2> " + err.string();
   const int status = std::system(command.c_str());
-  std::ifstream in(err);
-  std::stringstream text;
-  text << in.rdbuf();
-  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, text.str()};
+  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, test::ReadFile(err)};
 }
 
 class CleanTool : public ::testing::Test {

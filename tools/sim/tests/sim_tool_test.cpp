@@ -7,6 +7,7 @@
 #include <fstream>
 
 #include "rime/io/particles.h"
+#include "rime/test/files.h"
 
 namespace fs = std::filesystem;
 
@@ -171,10 +172,9 @@ TEST_F(SimTool, RefusesAboveTheMemoryBudgetBeforeWritingAFrame) {
   fs::path scene = WriteScene("");
   {
     // The same scene at a 1 cm spacing: about 9.4 k water and 67 k boundary particles.
-    std::ifstream in(scene);
-    std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    std::string text = rime::test::ReadFile(scene);
     text.replace(text.find("spacing = 0.04"), 14, "spacing = 0.01");
-    std::ofstream(scene) << text;
+    rime::test::WriteFile(scene, text);
   }
   MakeBoundary(scene);
   const Result r = Exec(Sim(scene, "sim", "--memory-budget 1M"));

@@ -23,7 +23,7 @@
 #include <thread>
 #include <vector>
 
-namespace rime::testing {
+namespace rime::test {
 
 class LocalSlurm {
  public:
@@ -171,4 +171,4 @@ class LocalSlurm {
   pid_t ctld_ = -1, slurmd_ = -1;
 };
 
-}  // namespace rime::testing
+}  // namespace rime::test

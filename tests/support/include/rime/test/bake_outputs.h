@@ -21,16 +21,11 @@
 #include <thread>
 #include <vector>
 
+#include "rime/test/files.h"
+
 extern char** environ;
 
 namespace rime::test {
-
-inline std::string ReadFile(const std::filesystem::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  std::stringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
 
 /// Removes every field whose name holds "seconds" (wall times differ from run to run).
 inline void DropTimings(nlohmann::json& value) {

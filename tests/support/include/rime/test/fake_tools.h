@@ -11,7 +11,7 @@
 #include <fstream>
 #include <string>
 
-namespace rime::bake::testing {
+namespace rime::test {
 
 /// A scene for the fake tools: frames 0..kFakeLastFrame (fps 2 x end_time 1.5 s). The fake
 /// simulation ignores omega, which tests edit to change the [simulation] section.
@@ -134,4 +134,4 @@ inline void WriteFakeTools(const std::filesystem::path& folder) {
   }
 }
 
-}  // namespace rime::bake::testing
+}  // namespace rime::test

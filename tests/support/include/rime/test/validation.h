@@ -2,17 +2,16 @@
 // (threads, load average, wall time) and a least-squares line fit.
 #pragma once
 
-#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
-#include <fstream>
 #include <string>
 #include <thread>
 #include <vector>
 
 #include "rime/core/log.h"
+#include "rime/test/measure.h"
 
 namespace rime::validation {
 
@@ -47,26 +46,13 @@ inline Options ParseOptions(int argc, char** argv, const char* usage) {
   return o;
 }
 
-inline std::string LoadAverage() {
-  std::ifstream f("/proc/loadavg");
-  std::string a, b, c;
-  f >> a >> b >> c;
-  return a + " " + b + " " + c;
-}
-
 /// One line with the variant, the hardware threads and the load, so timings can be judged.
 inline void PrintRunInfo(const char* name, const Options& o) {
   std::printf("%s (%s variant; %u hardware threads; load average %s)\n", name, o.full ? "full" : "fast",
-              std::thread::hardware_concurrency(), LoadAverage().c_str());
+              std::thread::hardware_concurrency(), test::LoadAverages().c_str());
 }
 
-class Stopwatch {
- public:
-  double seconds() const { return std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count(); }
-
- private:
-  std::chrono::steady_clock::time_point start_ = std::chrono::steady_clock::now();
-};
+using test::Stopwatch;
 
 /// How long a hydrostatic column started on a lattice settles, and then how long its pressures
 /// are averaged (rime_validation_hydrostatic and the speed/accuracy study). A lattice is no
