@@ -77,3 +77,17 @@ function(rime_add_program_test name)
   add_test(NAME ${name} COMMAND ${ARG_COMMAND})
   set_tests_properties(${name} PROPERTIES TIMEOUT ${ARG_TIMEOUT} LABELS "${labels}")
 endfunction()
+
+# rime_add_benchmark(STAGE SOURCES ... LIBS ...): the benchmark program rime-bench-<STAGE>, built
+# with the benchmarks. RIME_BENCH_OUTPUT_DIR (its folder in the build tree) is where it writes its
+# results unless told otherwise, so a run never dirties the source tree; RIME_SOURCE_DIR lets it
+# record the commit it measured (rime/test/measure.h).
+function(rime_add_benchmark stage)
+  cmake_parse_arguments(ARG "" "" "SOURCES;LIBS" ${ARGN})
+  set(name rime-bench-${stage})
+  add_executable(${name} ${ARG_SOURCES})
+  target_link_libraries(${name} PRIVATE ${ARG_LIBS} rime_test_support)
+  target_compile_definitions(${name} PRIVATE RIME_BENCH_OUTPUT_DIR="${CMAKE_CURRENT_BINARY_DIR}"
+                                             RIME_SOURCE_DIR="${PROJECT_SOURCE_DIR}")
+  rime_target_defaults(${name})
+endfunction()

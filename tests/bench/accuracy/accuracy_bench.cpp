@@ -456,7 +456,7 @@ int main(int argc, char** argv) {
   CLI::App app{"Rime speed/accuracy study (dam break over the solver knobs)"};
   int repeats = 3, threads = 0, freezing_repeats = 1;
   double end_time = 0.4;
-  std::string out_dir = "tests/bench/accuracy/results", only;
+  std::string out_dir = RIME_BENCH_OUTPUT_DIR, only;
   bool no_freezing = false, no_plots = false, no_hydrostatic = false, no_surface = false;
   app.add_option("--repeats", repeats, "Runs per setting (median time reported)");
   app.add_option("--end", end_time, "Simulated time, s (front sampled every 0.1 s)");
@@ -630,7 +630,8 @@ int main(int argc, char** argv) {
            << r["surface_error_p95_dp"] << "\n";
     }
   }
-  json doc = {{"study", "dam break speed/accuracy"}, {"column_width_m", kA}, {"end_time_s", end_time}, {"threads", used_threads},
+  json doc = {{"study", "dam break speed/accuracy"}, {"machine", test::MachineDescription()},
+              {"commit", test::SourceCommit(RIME_SOURCE_DIR)}, {"column_width_m", kA}, {"end_time_s", end_time}, {"threads", used_threads},
               {"repeats", repeats}, {"load_average_before", load_before}, {"load_average_after", load_after}, {"runs", out},
               {"voxel_sweep", surface_rows}};
   std::ofstream(out_dir + "/results.json") << doc.dump(2) << "\n";

@@ -1,7 +1,7 @@
 // Boundary sampling throughput: particles per second for the Stanford bunny scaled to
 // 0.5 m and for a 1-million-triangle torus, volumes included. Prints a table and writes JSON.
 //
-//   rime_bench_boundary [--repeats N] [--threads N] [--json FILE] [--mesh-dir DIR] [--case TEXT]
+//   rime-bench-boundary [--repeats N] [--threads N] [--json FILE] [--mesh-dir DIR] [--case TEXT]
 //
 // --case runs only the cases whose name contains TEXT (for profiling one of them).
 #include <fmt/format.h>
@@ -88,7 +88,7 @@ nlohmann::json RunCase(const Case& c, int repeats) {
 
 int main(int argc, char** argv) {
   int repeats = 5, threads = 0;
-  std::string json_path = "boundary_bench.json", only;
+  std::string json_path = RIME_BENCH_OUTPUT_DIR "/results.json", only;
   fs::path mesh_dir = fs::path(RIME_SHARED_DIR) / "meshes";
   for (int i = 1; i + 1 < argc; i += 2) {
     if (!std::strcmp(argv[i], "--repeats")) repeats = std::max(1, std::atoi(argv[i + 1]));
@@ -133,7 +133,8 @@ int main(int argc, char** argv) {
              " second of process CPU time over all threads, which stays meaningful on a machine shared with other work)\n");
   const double load_end = test::LoadAverage();
   fmt::print("load average at the end: {:.2f}\n", load_end);
-  std::ofstream(json_path) << nlohmann::json{{"benchmark", "boundary"}, {"threads", exec::CpuThreads()}, {"repeats", repeats},
+  std::ofstream(json_path) << nlohmann::json{{"benchmark", "boundary"}, {"machine", test::MachineDescription()},
+                                             {"commit", test::SourceCommit(RIME_SOURCE_DIR)}, {"threads", exec::CpuThreads()}, {"repeats", repeats},
                                              {"load_average_start", load_start}, {"load_average_end", load_end},
                                              {"results", results}}
                                   .dump(2)

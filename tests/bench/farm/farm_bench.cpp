@@ -62,7 +62,7 @@ int main(int argc, char** argv) {
   CLI::App app{"Local bake (-j 1) against a farm bake on a localhost Slurm cluster: wall times and per-task overhead"};
   int frames = 60, chunk = 1;
   bool keep = false;
-  std::string json_path = RIME_BINARY_DIR "/farm_bench.json";
+  std::string json_path = RIME_BENCH_OUTPUT_DIR "/results.json";
   app.add_option("--frames", frames, "Frames of the scene")->check(CLI::Range(2, 1000))->capture_default_str();
   app.add_option("--chunk", chunk, "Frames per array task")->check(CLI::PositiveNumber)->capture_default_str();
   app.add_option("--json", json_path, "JSON output file")->capture_default_str();
@@ -193,7 +193,9 @@ int main(int argc, char** argv) {
   const double sim_end = tasks["sim"].count(-1) ? tasks["sim"][-1].end : -1;
   for (const auto& [k, t] : tasks["surface"]) streamed += t.end > 0 && t.end < sim_end;
   std::printf("%d of %zu surface tasks finished before the simulation ended\n", streamed, tasks["surface"].size());
-  const json out = {{"frames", frames},
+  const json out = {{"machine", rime::test::MachineDescription()},
+                    {"commit", rime::test::SourceCommit(RIME_SOURCE_DIR)},
+                    {"frames", frames},
                     {"chunk", chunk},
                     {"cpus", std::thread::hardware_concurrency()},
                     {"local_wall_s", local_wall},

@@ -7,9 +7,12 @@
 #include <stdlib.h>
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cstdio>
+#include <fstream>
 #include <string>
+#include <thread>
 #include <vector>
 
 namespace rime::test {
@@ -45,6 +48,38 @@ inline std::string LoadAverages() {
   char text[64];
   std::snprintf(text, sizeof text, "%.2f %.2f %.2f", load[0], load[1], load[2]);
   return text;
+}
+
+/// The CPU model and the hardware threads, e.g. "AMD EPYC 9R14 (2 hardware threads)": a result
+/// file says which machine it was measured on.
+inline std::string MachineDescription() {
+  std::ifstream cpuinfo("/proc/cpuinfo");
+  std::string model = "unknown CPU";
+  for (std::string line; std::getline(cpuinfo, line);)
+    if (line.rfind("model name", 0) == 0 && line.find(':') != std::string::npos) {
+      model = line.substr(line.find(':') + 2);
+      break;
+    }
+  return model + " (" + std::to_string(std::thread::hardware_concurrency()) + " hardware threads)";
+}
+
+/// The commit checked out in `source_dir` when the benchmark runs, with "-dirty" when the tree has
+/// uncommitted changes; "unknown" outside a git checkout. A result file names the code it measured.
+inline std::string SourceCommit(const std::string& source_dir) {
+  const std::string git = "git -C '" + source_dir + "' ";
+  const auto first_line = [](const std::string& command) {
+    std::string line;
+    if (FILE* pipe = popen((command + " 2>/dev/null").c_str(), "r")) {
+      std::array<char, 256> buffer{};
+      if (std::fgets(buffer.data(), buffer.size(), pipe)) line = buffer.data();
+      pclose(pipe);
+    }
+    while (!line.empty() && (line.back() == '\n' || line.back() == '\r')) line.pop_back();
+    return line;
+  };
+  const std::string commit = first_line(git + "rev-parse --short HEAD");
+  if (commit.empty()) return "unknown";
+  return first_line(git + "status --porcelain --untracked-files=no").empty() ? commit : commit + "-dirty";
 }
 
 }  // namespace rime::test

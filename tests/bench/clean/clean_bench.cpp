@@ -53,7 +53,7 @@ int main(int argc, char** argv) {
   std::vector<std::size_t> sizes = {100000, 500000, 2000000};
   std::vector<std::string> shapes = {"ball", "torus"};
   int runs = 3, threads = 1;
-  std::string json_path = "bench_clean.json", scratch = (fs::temp_directory_path() / "rime_bench_clean").string();
+  std::string json_path = RIME_BENCH_OUTPUT_DIR "/results.json", scratch = (fs::temp_directory_path() / "rime_bench_clean").string();
   bool remesh = false, keep = false, hausdorff = false;
   std::string decimate_method(io::EnumName(io::CleanupSettings{}.decimate_method));
   app.add_option("--sizes", sizes, "Input triangle counts (approximate)");
@@ -168,7 +168,8 @@ int main(int argc, char** argv) {
                          {"distance", distance},
                          {"report", meshfix::ToJson(last)}});
     }
-  WriteFileAtomically(json_path, nlohmann::json({{"benchmark", "rime-clean default chain"}, {"threads", threads}, {"remesh", remesh},
+  WriteFileAtomically(json_path, nlohmann::json({{"benchmark", "rime-clean default chain"}, {"machine", test::MachineDescription()},
+                                                 {"commit", test::SourceCommit(RIME_SOURCE_DIR)}, {"threads", threads}, {"remesh", remesh},
                                                  {"decimate_method", decimate_method}, {"results", results}}).dump(2) + "\n");
   fmt::print("wrote {}\n", json_path);
   return 0;

@@ -9,7 +9,7 @@
 // and of the surface rime-surface reconstructs from them. Prints a table, writes results.json /
 // results.csv, and top/side PNG views of the final particles and of the reconstructed ice.
 //
-// Usage: rime-compare-im2013 [--full] [--out DIR] [--scene drop|throw] [--frames] [--ablation]
+// Usage: rime-bench-im2013 [--full] [--out DIR] [--scene drop|throw] [--frames] [--ablation]
 //   --frames also writes each run's final particle frame (.h5part) and its ice mesh (.obj).
 //   --ablation adds rime with one switch of the im2013 preset each: isotropic growth (rime+iso),
 //   Akinci 2013 surface tension (rime+ak13), no wall stickiness (rime-wall).
@@ -579,7 +579,7 @@ std::vector<Field> Fields(const Result& r) {
 int main(int argc, char** argv) {
   using namespace rime::compare;
   bool full = false, frames = false, ablation = false;
-  fs::path out = "results";
+  fs::path out = RIME_BENCH_OUTPUT_DIR;
   std::vector<std::string> scenes{"drop", "throw"};
   for (int i = 1; i < argc; ++i) {
     if (!std::strcmp(argv[i], "--full")) full = true;
@@ -588,7 +588,7 @@ int main(int argc, char** argv) {
     else if (!std::strcmp(argv[i], "--out") && i + 1 < argc) out = argv[++i];
     else if (!std::strcmp(argv[i], "--scene") && i + 1 < argc) scenes = {argv[++i]};
     else {
-      std::printf("usage: rime-compare-im2013 [--full] [--out DIR] [--scene drop|throw] [--frames] [--ablation]\n");
+      std::printf("usage: rime-bench-im2013 [--full] [--out DIR] [--scene drop|throw] [--frames] [--ablation]\n");
       return std::strcmp(argv[i], "--help") ? 2 : 0;
     }
   }
@@ -618,7 +618,8 @@ int main(int argc, char** argv) {
   for (const Field& f : Fields(Result{}))
     if (!f.json_only) header += (header.empty() ? "" : ",") + std::string(f.name);
   csv << header << "\n";
-  std::string json = fmt::format("{{\n  \"run\": \"{}\",\n  \"results\": [\n", run_info);
+  std::string json = fmt::format("{{\n  \"run\": \"{}\",\n  \"machine\": \"{}\",\n  \"commit\": \"{}\",\n  \"results\": [\n", run_info,
+                                 rime::test::MachineDescription(), rime::test::SourceCommit(RIME_SOURCE_DIR));
   for (std::size_t k = 0; k < results.size(); ++k) {
     const Result& r = results[k];
     std::printf("%-6s %-9s %6lld %6lld %7lld %7lld %7lld %7lld %7lld %7lld %7lld %7lld %7.1f %7.1f %7.1f %7.1f %6.0f%s\n", r.scene.c_str(), r.method.c_str(),
