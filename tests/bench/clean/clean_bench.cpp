@@ -16,8 +16,8 @@
 #include "rime/core/atomic_file.h"
 #include "rime/exec/device.h"
 #include "rime/io/mesh.h"
-#include "rime/meshfix/clean.h"
-#include "rime/meshfix/procedural.h"
+#include "rime/clean/clean.h"
+#include "rime/clean/procedural.h"
 #include "rime/test/measure.h"
 
 using namespace rime;
@@ -38,7 +38,7 @@ std::pair<double, double> DistanceTo(const io::TriMesh& from, const io::TriMesh&
   for (const auto& t : from.triangles) samples.push_back((from.positions[t[0]] + from.positions[t[1]] + from.positions[t[2]]) / 3.0f);
   io::TriMesh surface = to;
   surface.velocities = to.positions;
-  const std::vector<Vec3f> nearest = meshfix::TransferVelocities(surface, samples);
+  const std::vector<Vec3f> nearest = clean::TransferVelocities(surface, samples);
   double largest = 0, sum = 0;
   for (std::size_t i = 0; i < samples.size(); ++i) {
     const double d = Norm(Vec3d(samples[i]) - Vec3d(nearest[i]));
@@ -80,14 +80,14 @@ int main(int argc, char** argv) {
              "read s", "write s", "clean s", "cpu s", "k tri/s", "k tri/cpu-s");
   for (const std::string& shape : shapes)
     for (std::size_t size : sizes) {
-      io::TriMesh mesh = shape == "ball" ? meshfix::procedural::NoisyBall(size, 1) : meshfix::procedural::NoisyTorus(size, 1);
+      io::TriMesh mesh = shape == "ball" ? clean::procedural::NoisyBall(size, 1) : clean::procedural::NoisyTorus(size, 1);
       // A rigid rotation's velocity field, as rime-surface writes for motion blur.
       for (const Vec3f& p : mesh.positions) mesh.velocities.push_back(Vec3f(-p.y, p.x, 0.1f));
       const fs::path file = fs::path(scratch) / fmt::format("{}_{}.ply", shape, size);
       std::vector<double> read_s, write_s, clean_s, cpu_s, read_obj_s, write_obj_s;
       const fs::path obj_file = fs::path(file).replace_extension(".obj");
       std::map<std::string, std::vector<double>> per_op, per_op_cpu;
-      meshfix::CleanReport last;
+      clean::CleanReport last;
       io::TriMesh last_mesh;
       std::vector<double> load;
       for (int r = 0; r < runs; ++r) {
@@ -106,7 +106,7 @@ int main(int argc, char** argv) {
         fs::remove(obj_file);
         watch.Restart();
         const double cpu0 = ProcessCpuSeconds();
-        meshfix::CleanResult result = meshfix::Clean(read, settings);
+        clean::CleanResult result = clean::Clean(read, settings);
         clean_s.push_back(watch.seconds());
         cpu_s.push_back(ProcessCpuSeconds() - cpu0);
         for (const auto& op : result.report.operations) {
@@ -132,7 +132,7 @@ int main(int argc, char** argv) {
       }
       fmt::print("{:>6} {:>9} {:>9} {:>7.2f} {:>7.2f} {:>8.2f} {:>8.2f} {:>8.0f} {:>12.0f} {}\n", shape, last.before.faces,
                  last.after.faces, test::Median(read_s), test::Median(write_s), clean, cpu, rate / 1e3, rate_per_core_cpu / 1e3, ops);
-      fmt::print("{:>6} {}\n", "", meshfix::SummaryLine(last));
+      fmt::print("{:>6} {}\n", "", clean::SummaryLine(last));
       nlohmann::json distance;
       if (hausdorff) {
         const auto [in_out, in_out_mean] = DistanceTo(mesh, last_mesh);
@@ -166,7 +166,7 @@ int main(int argc, char** argv) {
                          {"operations_cpu_seconds", op_cpu_json},
                          {"load_average_1min", test::Median(load)},
                          {"distance", distance},
-                         {"report", meshfix::ToJson(last)}});
+                         {"report", clean::ToJson(last)}});
     }
   WriteFileAtomically(json_path, nlohmann::json({{"benchmark", "rime-clean default chain"}, {"machine", test::MachineDescription()},
                                                  {"commit", test::SourceCommit(RIME_SOURCE_DIR)}, {"threads", threads}, {"remesh", remesh},

@@ -178,7 +178,7 @@ int main(int argc, char** argv) {
       run.push_back(t.end - t.start);
       tool.push_back(t.tool);
       overhead.push_back(t.end - t.start - t.tool);
-      if (group == "cleanup" && tasks["surface"].count(k)) latency.push_back(t.start - tasks["surface"][k].end);
+      if (group == "clean" && tasks["surface"].count(k)) latency.push_back(t.start - tasks["surface"][k].end);
       if (group == "surface") latency.push_back(t.end - frame_mtime(std::min(frames - 1, (k + 1) * chunk - 1)));
     }
     const Stats w = Summarize(wait), r = Summarize(run), tl = Summarize(tool), o = Summarize(overhead), l = Summarize(latency);

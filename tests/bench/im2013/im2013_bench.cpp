@@ -86,7 +86,7 @@ method = "{2}"
 [water]
 spacing = {3}
 
-[simulation]
+[sim]
 modules = ["gravity", "viscosity", "surface_tension", "freezing"]
 
 [freezing]

@@ -44,7 +44,7 @@ class SimTool : public ::testing::Test {
     const fs::path scene = dir_ / "scene.toml";
     std::ofstream(scene) << "[scene]\nfps = " << fps << "\nend_time = " << end_time << "\n"
                          << "[water]\nspacing = 0.04\n"
-                         << "[simulation]\nmodules = [\"gravity\", \"viscosity\", \"freezing\"]\n" << simulation_extra << "\n"
+                         << "[sim]\nmodules = [\"gravity\", \"viscosity\", \"freezing\"]\n" << simulation_extra << "\n"
                          << "[freezing]\nglaze_threshold = 0.01\nicicle_threshold = 0.002\n"
                          << "[[solid]]\nname = \"tank\"\nshape = \"box\"\ncontainer = true\nsize = [0.6, 0.6, 0.4]\ntranslate = [0, 0, 0.2]\n"
                          << "[[water_block]]\nmin = [-0.15, -0.15, 0.15]\nmax = [0.1, 0.1, 0.3]\nvelocity = [0.5, 0, -1]\n";
@@ -73,7 +73,7 @@ TEST_F(SimTool, InvalidSceneValueNamesFileLineAndField) {
   const fs::path scene = WriteScene("omega = 1.5");
   const Result r = Exec(Sim(scene, "sim"));
   EXPECT_EQ(r.code, 3) << r.output;
-  EXPECT_NE(r.output.find("scene.toml:8: simulation.omega"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("scene.toml:8: sim.omega"), std::string::npos) << r.output;
   EXPECT_FALSE(fs::exists(dir_ / "sim" / "particles.0000.h5part"));
 }
 

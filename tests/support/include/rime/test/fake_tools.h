@@ -14,7 +14,7 @@
 namespace rime::test {
 
 /// A scene for the fake tools: frames 0..kFakeLastFrame (fps 2 x end_time 1.5 s). The fake
-/// simulation ignores omega, which tests edit to change the [simulation] section.
+/// simulation ignores omega, which tests edit to change the [sim] section.
 constexpr int kFakeLastFrame = 3;
 constexpr const char* kFakeScene = R"([scene]
 fps = 2
@@ -23,7 +23,7 @@ end_time = 1.5
 [water]
 spacing = 0.05
 
-[simulation]
+[sim]
 modules = ["gravity"]
 omega = 0.5
 

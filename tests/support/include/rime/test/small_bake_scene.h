@@ -21,7 +21,7 @@ end_time = {:.3f}
 [water]
 spacing = 0.025
 
-[simulation]
+[sim]
 modules = ["gravity", "viscosity", "surface_tension", "freezing"]
 
 [domain]

@@ -3,7 +3,7 @@
 ///
 /// @code
 ///   io::CleanupSettings settings;              // defaults, or scene.cleanup
-///   meshfix::CleanResult r = meshfix::Clean(io::ReadMesh(in), settings);
+///   clean::CleanResult r = clean::Clean(io::ReadMesh(in), settings);
 ///   io::WriteMesh(out, r.mesh);                // r.report: what changed, what is left
 /// @endcode
 /// Operations run in the order of io::CleanupSettings; each can be switched off. Per-vertex
@@ -19,9 +19,9 @@
 
 #include "rime/io/mesh.h"
 #include "rime/io/scene_cleanup.h"
-#include "rime/meshfix/quality.h"
+#include "rime/clean/quality.h"
 
-namespace rime::meshfix {
+namespace rime::clean {
 
 struct OperationRecord {
   std::string name;   // "repair", "degenerate", "components", "holes", "remesh", "smooth", ...
@@ -66,4 +66,4 @@ nlohmann::json ToJson(const CleanReport& report);
 /// One line: "82k -> 41k faces, 7 -> 1 components, closed manifold, volume -0.12%, min angle 21.3°, 1.2 s".
 std::string SummaryLine(const CleanReport& report);
 
-}  // namespace rime::meshfix
+}  // namespace rime::clean

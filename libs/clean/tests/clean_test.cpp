@@ -7,11 +7,11 @@
 
 #include "rime/core/error.h"
 #include "rime/io/scene.h"
-#include "rime/meshfix/clean.h"
-#include "rime/meshfix/decimate.h"
-#include "rime/meshfix/procedural.h"
+#include "rime/clean/clean.h"
+#include "rime/clean/decimate.h"
+#include "rime/clean/procedural.h"
 
-namespace rime::meshfix {
+namespace rime::clean {
 namespace {
 
 constexpr double kPi = 3.14159265358979323846;
@@ -427,7 +427,7 @@ TEST(Clean, InwardMeshIsReoriented) {
 
 TEST(CleanupScene, ReadsFieldsAndChecksRanges) {
   const io::Scene scene = io::ParseScene(R"(
-[cleanup]
+[clean]
 remesh = true
 target_edge = 0.004
 decimate_ratio = 0.25
@@ -444,8 +444,8 @@ self_intersections = "remove"
   EXPECT_EQ(scene.cleanup.self_intersections, io::SelfIntersections::kRemove);
   EXPECT_TRUE(scene.cleanup.fill_holes);  // default kept
 
-  for (const char* bad : {"[cleanup]\ndecimate_ratio = 1.5\n", "[cleanup]\nsmooth = \"laplace\"\n",
-                          "[cleanup]\nmax_hole_edges = 2\n", "[cleanup]\ndecimat = true\n"}) {
+  for (const char* bad : {"[clean]\ndecimate_ratio = 1.5\n", "[clean]\nsmooth = \"laplace\"\n",
+                          "[clean]\nmax_hole_edges = 2\n", "[clean]\ndecimat = true\n"}) {
     try {
       io::ParseScene(bad, "clean.toml");
       ADD_FAILURE() << "accepted " << bad;
@@ -457,9 +457,9 @@ self_intersections = "remove"
 }
 
 }  // namespace
-}  // namespace rime::meshfix
+}  // namespace rime::clean
 
-namespace rime::meshfix {
+namespace rime::clean {
 namespace {
 
 // Two interpenetrating spheres in one mesh: the report counts the intersecting pairs; "remove"
@@ -504,4 +504,4 @@ TEST(Clean, HolesLargerThanTheLimitStayOpenWithAWarning) {
 }
 
 }  // namespace
-}  // namespace rime::meshfix
+}  // namespace rime::clean

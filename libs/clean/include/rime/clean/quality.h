@@ -7,7 +7,7 @@
 
 #include "rime/io/mesh.h"
 
-namespace rime::meshfix {
+namespace rime::clean {
 
 struct MeshStats {
   std::size_t vertices = 0;                 // referenced by at least one triangle
@@ -29,4 +29,4 @@ struct MeshStats {
 /// Measures `mesh` in O(faces) (parallel over vertices).
 MeshStats ComputeStats(const io::TriMesh& mesh);
 
-}  // namespace rime::meshfix
+}  // namespace rime::clean

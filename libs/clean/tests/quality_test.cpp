@@ -2,10 +2,10 @@
 
 #include <cmath>
 
-#include "rime/meshfix/procedural.h"
-#include "rime/meshfix/quality.h"
+#include "rime/clean/procedural.h"
+#include "rime/clean/quality.h"
 
-namespace rime::meshfix {
+namespace rime::clean {
 namespace {
 
 constexpr double kPi = 3.14159265358979323846;
@@ -95,4 +95,4 @@ TEST(Quality, SurfaceNetsBallIsClosedOutward) {
 }
 
 }  // namespace
-}  // namespace rime::meshfix
+}  // namespace rime::clean

@@ -1,5 +1,5 @@
-// Ice look metrics (rime/meshfix/ice_metrics.h); the definitions are in docs/ice-metrics.md.
-#include "rime/meshfix/ice_metrics.h"
+// Ice look metrics (rime/clean/ice_metrics.h); the definitions are in docs/ice-metrics.md.
+#include "rime/clean/ice_metrics.h"
 
 #include <algorithm>
 #include <cmath>
@@ -10,7 +10,7 @@
 #include "rime/exec/device.h"
 #include "rime/neighbors/grid.h"
 
-namespace rime::meshfix {
+namespace rime::clean {
 namespace {
 
 constexpr double kPi = 3.14159265358979323846;
@@ -340,4 +340,4 @@ IceMetrics MeasureIce(const io::TriMesh& mesh, const io::ParticleFrame& frame, c
   return m;
 }
 
-}  // namespace rime::meshfix
+}  // namespace rime::clean

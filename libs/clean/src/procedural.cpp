@@ -1,11 +1,11 @@
-// Procedural test meshes (see rime/meshfix/procedural.h).
-#include "rime/meshfix/procedural.h"
+// Procedural test meshes (see rime/clean/procedural.h).
+#include "rime/clean/procedural.h"
 
 #include <cmath>
 #include <random>
 #include <unordered_map>
 
-namespace rime::meshfix::procedural {
+namespace rime::clean::procedural {
 namespace {
 constexpr double kPi = 3.14159265358979323846;
 }
@@ -175,4 +175,4 @@ void PunchHole(io::TriMesh& mesh, Vec3d center, double radius) {
   });
 }
 
-}  // namespace rime::meshfix::procedural
+}  // namespace rime::clean::procedural

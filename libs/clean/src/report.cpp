@@ -1,9 +1,9 @@
-// Cleanup report as JSON and as one human line (see rime/meshfix/clean.h).
+// Cleanup report as JSON and as one human line (see rime/clean/clean.h).
 #include <fmt/format.h>
 
-#include "rime/meshfix/clean.h"
+#include "rime/clean/clean.h"
 
-namespace rime::meshfix {
+namespace rime::clean {
 
 nlohmann::json ToJson(const MeshStats& s) {
   return {{"vertices", s.vertices},
@@ -70,4 +70,4 @@ std::string SummaryLine(const CleanReport& r) {
                      100 * RelativeChange(r.before.area, r.after.area), r.after.min_angle_deg, r.seconds);
 }
 
-}  // namespace rime::meshfix
+}  // namespace rime::clean

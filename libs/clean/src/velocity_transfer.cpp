@@ -1,4 +1,4 @@
-// Velocity transfer from the input surface (see TransferVelocities in rime/meshfix/clean.h).
+// Velocity transfer from the input surface (see TransferVelocities in rime/clean/clean.h).
 // Closest points through a bounding-box tree over the input triangles (median splits, nodes in
 // depth-first order in one array, 4 triangles per leaf).
 #include <algorithm>
@@ -7,9 +7,9 @@
 #include <limits>
 
 #include "rime/exec/parallel.h"
-#include "rime/meshfix/clean.h"
+#include "rime/clean/clean.h"
 
-namespace rime::meshfix {
+namespace rime::clean {
 namespace {
 
 struct Box {
@@ -175,4 +175,4 @@ std::vector<Vec3f> TransferVelocities(const io::TriMesh& source, const std::vect
   return out;
 }
 
-}  // namespace rime::meshfix
+}  // namespace rime::clean

@@ -1,6 +1,6 @@
-// Mesh measures for the cleanup report (see rime/meshfix/quality.h). Plain C++: no CGAL here, so
+// Mesh measures for the cleanup report (see rime/clean/quality.h). Plain C++: no CGAL here, so
 // the report is computed the same way for the input (possibly non-manifold) and the output.
-#include "rime/meshfix/quality.h"
+#include "rime/clean/quality.h"
 
 #include <algorithm>
 #include <atomic>
@@ -10,7 +10,7 @@
 #include "rime/core/union_find.h"
 #include "rime/exec/parallel.h"
 
-namespace rime::meshfix {
+namespace rime::clean {
 namespace {
 
 constexpr double kPi = 3.14159265358979323846;
@@ -145,4 +145,4 @@ MeshStats ComputeStats(const io::TriMesh& mesh) {
   return s;
 }
 
-}  // namespace rime::meshfix
+}  // namespace rime::clean

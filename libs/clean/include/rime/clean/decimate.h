@@ -17,7 +17,7 @@
 
 #include "rime/core/math.h"
 
-namespace rime::meshfix {
+namespace rime::clean {
 
 struct DecimateResult {
   std::size_t collapses = 0;
@@ -32,4 +32,4 @@ struct DecimateResult {
 DecimateResult DecimateQuadric(std::vector<Vec3d>& positions, std::vector<std::array<std::uint32_t, 3>>& triangles,
                                std::size_t target_faces, double max_error);
 
-}  // namespace rime::meshfix
+}  // namespace rime::clean

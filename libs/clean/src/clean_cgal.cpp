@@ -1,4 +1,4 @@
-// The cleanup chain (see rime/meshfix/clean.h). Every CGAL call of rime-clean is in this one
+// The cleanup chain (see rime/clean/clean.h). Every CGAL call of rime-clean is in this one
 // translation unit: CGAL headers take minutes to compile.
 //
 // Costs measured with CGAL 5.5.1 on a closed 438k-triangle mesh, one thread (LIBRARY_NOTES.md):
@@ -37,10 +37,10 @@
 
 #include "rime/core/error.h"
 #include "rime/core/log.h"
-#include "rime/meshfix/clean.h"
-#include "rime/meshfix/decimate.h"
+#include "rime/clean/clean.h"
+#include "rime/clean/decimate.h"
 
-namespace rime::meshfix {
+namespace rime::clean {
 namespace {
 
 using Kernel = CGAL::Exact_predicates_inexact_constructions_kernel;
@@ -495,4 +495,4 @@ CleanResult Clean(const io::TriMesh& input, const io::CleanupSettings& settings)
   return result;
 }
 
-}  // namespace rime::meshfix
+}  // namespace rime::clean

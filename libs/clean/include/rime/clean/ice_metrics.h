@@ -5,8 +5,8 @@
 /// @code
 /// rime::io::TriMesh mesh = rime::io::ReadMesh("out/default/clean/ice_clean.0036.obj");
 /// rime::io::ParticleFrame frame = rime::io::ReadParticleFrame("out/default/cache/sim/particles.0036.h5part");
-/// rime::meshfix::IceMetricsSettings settings;   // lengths in particle spacings d_p
-/// rime::meshfix::IceMetrics m = rime::meshfix::MeasureIce(mesh, frame, {0, 0, -9.81}, {1}, settings);
+/// rime::clean::IceMetricsSettings settings;   // lengths in particle spacings d_p
+/// rime::clean::IceMetrics m = rime::clean::MeasureIce(mesh, frame, {0, 0, -9.81}, {1}, settings);
 /// @endcode
 #pragma once
 
@@ -19,7 +19,7 @@
 #include "rime/io/mesh.h"
 #include "rime/io/particles.h"
 
-namespace rime::meshfix {
+namespace rime::clean {
 
 /// Lengths are in particle spacings d_p (the frame's `spacing`).
 struct IceMetricsSettings {
@@ -73,4 +73,4 @@ struct IceMetrics {
 IceMetrics MeasureIce(const io::TriMesh& mesh, const io::ParticleFrame& frame, const Vec3d& gravity,
                       const std::set<std::uint32_t>& objects, const IceMetricsSettings& settings);
 
-}  // namespace rime::meshfix
+}  // namespace rime::clean

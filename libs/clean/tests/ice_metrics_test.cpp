@@ -3,10 +3,10 @@
 #include <cmath>
 #include <functional>
 
-#include "rime/meshfix/ice_metrics.h"
-#include "rime/meshfix/procedural.h"
+#include "rime/clean/ice_metrics.h"
+#include "rime/clean/procedural.h"
 
-namespace rime::meshfix {
+namespace rime::clean {
 namespace {
 
 using namespace procedural;
@@ -152,4 +152,4 @@ TEST(IceMetrics, IceConnectedToNoSolidFloats) {
 }
 
 }  // namespace
-}  // namespace rime::meshfix
+}  // namespace rime::clean

@@ -9,7 +9,7 @@
 
 #include "rime/io/mesh.h"
 
-namespace rime::meshfix::procedural {
+namespace rime::clean::procedural {
 
 /// Unit-subdivided icosahedron projected on a sphere: 20 * 4^subdivisions triangles, outward.
 io::TriMesh Icosphere(double radius, int subdivisions, Vec3d center = {0, 0, 0});
@@ -32,4 +32,4 @@ void Append(io::TriMesh& mesh, const io::TriMesh& other);
 /// Removes the triangles whose centroid lies within `radius` of `center` (makes a hole).
 void PunchHole(io::TriMesh& mesh, Vec3d center, double radius);
 
-}  // namespace rime::meshfix::procedural
+}  // namespace rime::clean::procedural

@@ -1,7 +1,7 @@
-// Batched quadric edge-collapse decimation (see rime/meshfix/decimate.h). Plain C++ over flat
+// Batched quadric edge-collapse decimation (see rime/clean/decimate.h). Plain C++ over flat
 // arrays: CGAL's edge_collapse spent most of rime-clean's time on its priority queue and halfedge
 // bookkeeping (14 of 22 s on a 2M-triangle frame).
-#include "rime/meshfix/decimate.h"
+#include "rime/clean/decimate.h"
 
 #include <algorithm>
 #include <cmath>
@@ -10,7 +10,7 @@
 
 #include "rime/exec/parallel.h"
 
-namespace rime::meshfix {
+namespace rime::clean {
 namespace {
 
 using Tri = std::array<std::uint32_t, 3>;
@@ -322,4 +322,4 @@ DecimateResult DecimateQuadric(std::vector<Vec3d>& positions, std::vector<std::a
   return Decimator(positions, triangles).Run(target_faces, max_error);
 }
 
-}  // namespace rime::meshfix
+}  // namespace rime::clean
