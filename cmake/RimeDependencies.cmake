@@ -1,5 +1,5 @@
 # Every third-party library Rime uses, found once here. README.md says why each is needed.
-find_package(Eigen3 3.3 REQUIRED NO_MODULE)        # dense 3x3 algebra in host-only code (tests, meshfix)
+find_package(Eigen3 3.3 REQUIRED NO_MODULE)        # dense 3x3 algebra in host-only code (tests, libs/clean)
 find_package(TBB REQUIRED)                         # CPU backend of the execution layer
 find_package(HDF5 REQUIRED COMPONENTS C)           # particle frames (H5Part layout)
 find_package(tomlplusplus REQUIRED)                # scene files with source positions for errors

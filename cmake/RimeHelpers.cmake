@@ -12,25 +12,86 @@ endfunction()
 # magnitude slower.
 set(RIME_TEST_TIMEOUT 900 CACHE STRING "CTest TIMEOUT of each GoogleTest case")
 
-# rime_add_test(NAME SOURCES ... LIBS ... [LABELS ...] [PROPERTIES ...]): one GoogleTest executable
-# registered with CTest; LABELS and PROPERTIES (single-valued, e.g. RESOURCE_LOCK) apply to each test.
+# Every test carries exactly one of these labels: `unit` (fast and self-contained: the inner loop,
+# `ctest -L unit`), `slow` (long simulations, real multi-stage bakes, a local cluster) or
+# `validation` (figures against analytic or measured references). docs/testing.md describes them.
+set(RIME_TEST_KINDS unit slow validation)
+
+function(rime_require_test_kind caller kind)
+  if(NOT kind IN_LIST RIME_TEST_KINDS)
+    message(FATAL_ERROR "${caller}: KIND must be one of ${RIME_TEST_KINDS} (got '${kind}')")
+  endif()
+endfunction()
+
+# rime_add_test(NAME SOURCES ... LIBS ... KIND unit|slow|validation [SLOW test ...] [LABELS ...]
+#               [PROPERTIES ...]): one GoogleTest executable registered with CTest. KIND labels
+# each of its tests; SLOW names tests (Suite.Name) of a `unit` executable that are `slow` instead;
+# LABELS are extra labels (e.g. farm); PROPERTIES (single-valued, e.g. RESOURCE_LOCK) apply to each.
 function(rime_add_test name)
   if(NOT RIME_BUILD_TESTS)
     return()
   endif()
-  cmake_parse_arguments(ARG "" "" "SOURCES;LIBS;LABELS;PROPERTIES" ${ARGN})
+  cmake_parse_arguments(ARG "" "KIND" "SOURCES;LIBS;SLOW;LABELS;PROPERTIES" ${ARGN})
+  rime_require_test_kind("rime_add_test(${name})" "${ARG_KIND}")
+  if(ARG_SLOW AND NOT ARG_KIND STREQUAL "unit")
+    message(FATAL_ERROR "rime_add_test(${name}): SLOW only moves tests of a unit executable")
+  endif()
   add_executable(${name} ${ARG_SOURCES})
-  target_link_libraries(${name} PRIVATE ${ARG_LIBS} GTest::gtest GTest::gtest_main)
+  target_link_libraries(${name} PRIVATE ${ARG_LIBS} rime_test_support GTest::gtest GTest::gtest_main)
   target_compile_definitions(${name} PRIVATE
     RIME_SOURCE_DIR="${PROJECT_SOURCE_DIR}"
     RIME_SHARED_DIR="${PROJECT_SOURCE_DIR}/../shared"
     RIME_BINARY_DIR="${PROJECT_BINARY_DIR}")
   rime_target_defaults(${name})
   gtest_discover_tests(${name} DISCOVERY_TIMEOUT 60 TEST_LIST ${name}_TESTS PROPERTIES TIMEOUT ${RIME_TEST_TIMEOUT} ${ARG_PROPERTIES})
-  if(ARG_LABELS)
-    # gtest_discover_tests flattens list-valued properties; set the labels once the tests are known.
-    set(labels_file ${CMAKE_CURRENT_BINARY_DIR}/${name}_labels.cmake)
-    file(WRITE ${labels_file} "set_tests_properties(\${${name}_TESTS} PROPERTIES LABELS \"${ARG_LABELS}\")\n")
-    set_property(DIRECTORY APPEND PROPERTY TEST_INCLUDE_FILES ${labels_file})
+  # gtest_discover_tests flattens list-valued properties; set the labels once the tests are known.
+  # CTest appends labels, so each test is labelled once. CTest reads this file without policies
+  # (no if(IN_LIST)); the list is undefined when the executable was not built. A SLOW name that no
+  # longer matches a test stops ctest, so a renamed test cannot quietly turn unit.
+  set(labels_file ${CMAKE_CURRENT_BINARY_DIR}/${name}_labels.cmake)
+  set(labels ${ARG_KIND} ${ARG_LABELS})
+  set(slow_labels slow ${ARG_LABELS})
+  set(script "if(DEFINED ${name}_TESTS)\n  set(kind_tests \${${name}_TESTS})\n")
+  foreach(test ${ARG_SLOW})
+    string(APPEND script
+      "  list(FIND ${name}_TESTS \"${test}\" found)\n"
+      "  if(found EQUAL -1)\n"
+      "    message(FATAL_ERROR \"${name}: SLOW names ${test}, which is not one of its tests (renamed?)\")\n"
+      "  endif()\n"
+      "  list(REMOVE_ITEM kind_tests \"${test}\")\n"
+      "  set_tests_properties(\"${test}\" PROPERTIES LABELS \"${slow_labels}\")\n")
+  endforeach()
+  string(APPEND script "  if(kind_tests)\n    set_tests_properties(\${kind_tests} PROPERTIES LABELS \"${labels}\")\n  endif()\nendif()\n")
+  file(WRITE ${labels_file} "${script}")
+  set_property(DIRECTORY APPEND PROPERTY TEST_INCLUDE_FILES ${labels_file})
+endfunction()
+
+# rime_add_program_test(NAME KIND unit|slow|validation COMMAND ... [TIMEOUT s] [LABELS ...]): a test
+# that runs a program which is not a GoogleTest executable (its exit code decides), labelled alike.
+function(rime_add_program_test name)
+  if(NOT RIME_BUILD_TESTS)
+    return()
   endif()
+  cmake_parse_arguments(ARG "" "KIND;TIMEOUT" "COMMAND;LABELS" ${ARGN})
+  rime_require_test_kind("rime_add_program_test(${name})" "${ARG_KIND}")
+  if(NOT ARG_TIMEOUT)
+    set(ARG_TIMEOUT 900)
+  endif()
+  set(labels ${ARG_KIND} ${ARG_LABELS})
+  add_test(NAME ${name} COMMAND ${ARG_COMMAND})
+  set_tests_properties(${name} PROPERTIES TIMEOUT ${ARG_TIMEOUT} LABELS "${labels}")
+endfunction()
+
+# rime_add_benchmark(STAGE SOURCES ... LIBS ...): the benchmark program rime-bench-<STAGE>, built
+# with the benchmarks. RIME_BENCH_OUTPUT_DIR (its folder in the build tree) is where it writes its
+# results unless told otherwise, so a run never dirties the source tree; RIME_SOURCE_DIR lets it
+# record the commit it measured (rime/test/measure.h).
+function(rime_add_benchmark stage)
+  cmake_parse_arguments(ARG "" "" "SOURCES;LIBS" ${ARGN})
+  set(name rime-bench-${stage})
+  add_executable(${name} ${ARG_SOURCES})
+  target_link_libraries(${name} PRIVATE ${ARG_LIBS} rime_test_support)
+  target_compile_definitions(${name} PRIVATE RIME_BENCH_OUTPUT_DIR="${CMAKE_CURRENT_BINARY_DIR}"
+                                             RIME_SOURCE_DIR="${PROJECT_SOURCE_DIR}")
+  rime_target_defaults(${name})
 endfunction()

@@ -13,7 +13,7 @@ namespace fs = std::filesystem;
 namespace rime::bake {
 namespace {
 
-constexpr const char* kStageNames[kStageCount] = {"boundary", "sim", "surface", "cleanup", "preview"};
+constexpr const char* kStageNames[kStageCount] = {"boundary", "sim", "surface", "clean", "preview"};
 
 fs::path RequireTool(const GraphOptions& options, const std::string& name) {
   const fs::path program = options.tools_folder / name;
@@ -40,8 +40,8 @@ const char* StageName(Stage stage) { return kStageNames[static_cast<int>(stage)]
 std::optional<Stage> ParseStage(const std::string& name) {
   for (int s = 0; s < kStageCount; ++s)
     if (name == kStageNames[s]) return static_cast<Stage>(s);
-  if (name == "simulate" || name == "simulation") return Stage::kSim;
-  if (name == "clean") return Stage::kCleanup;
+  for (const auto& [former, current] : {std::pair{"cleanup", "clean"}, {"simulate", "sim"}, {"simulation", "sim"}})
+    if (name == former) throw Error(ExitCode::kUsage, fmt::format("stage '{}' is now called '{}'", former, current));
   return std::nullopt;
 }
 
@@ -52,13 +52,13 @@ std::vector<std::string> SectionsReadBy(Stage stage, const SceneDocument& doc) {
     case Stage::kSim: {
       std::vector<std::string> sections;
       for (const auto& s : doc.sections())
-        if (s != "surface" && s != "cleanup" && s != "bake" && s != "farm") sections.push_back(s);
+        if (s != "surface" && s != "clean" && s != "bake" && s != "farm") sections.push_back(s);
       return sections;
     }
     case Stage::kSurface:  // [freezing] holds the ice anisotropy parameters (k_r, k_n, N_eps) it may reuse
       return {"surface", "water", "freezing", "scene.quality"};
-    case Stage::kCleanup:
-      return {"cleanup", "surface", "water", "scene.quality"};
+    case Stage::kClean:
+      return {"clean", "surface", "water", "scene.quality"};
     case Stage::kPreview:
       return {"bake", "solid", "water_block", "emitter", "domain", "scene.fps"};
   }
@@ -138,7 +138,7 @@ std::vector<Job> BuildGraph(const SceneDocument& doc, const BakeLayout& layout, 
     if (options.cpu_threads > 0) args.insert(args.end(), {"-j", std::to_string(options.cpu_threads)});
   };
 
-  // 3-5. Per frame: surface → cleanup → preview render. What rime-surface writes follows the
+  // 3-5. Per frame: surface → clean → preview render. What rime-surface writes follows the
   // scene's [surface] phase ("ice", "water", "both") and formats (obj, ply, vdb).
   const io::SurfaceSettings& surfacing = scene.surface;
   std::vector<std::string> phases;
@@ -151,8 +151,8 @@ std::vector<Job> BuildGraph(const SceneDocument& doc, const BakeLayout& layout, 
   // the surface writes OBJ, else PLY.
   const std::string cleaned_phase = phases.front();
   const char* mesh_format = has_format("obj") ? "obj" : "ply";
-  if (target >= Stage::kCleanup && !has_format("obj") && !has_format("ply"))
-    throw InputError("[surface] formats has no mesh format (obj or ply), so the cleanup stage has nothing to clean; add \"obj\" or "
+  if (target >= Stage::kClean && !has_format("obj") && !has_format("ply"))
+    throw InputError("[surface] formats has no mesh format (obj or ply), so the clean stage has nothing to clean; add \"obj\" or "
                      "bake only up to the surface stage",
                      scene_path + ": surface.formats");
   const fs::path preview_data = layout.cache() / "preview";
@@ -179,9 +179,9 @@ std::vector<Job> BuildGraph(const SceneDocument& doc, const BakeLayout& layout, 
     const fs::path mesh = io::FramePath(layout.surface(), cleaned_phase, f, mesh_format);
     const std::string cleaned = cleaned_phase + "_clean";
     Job cleanup;
-    cleanup.stage = Stage::kCleanup;
+    cleanup.stage = Stage::kClean;
     cleanup.frame = f;
-    cleanup.id = "cleanup." + Padded(f);
+    cleanup.id = "clean." + Padded(f);
     cleanup.tool_name = "rime-clean";
     cleanup.program = RequireTool(options, cleanup.tool_name);
     cleanup.args = {mesh.string(), "-o", layout.clean().string(), "--scene", scene_path};

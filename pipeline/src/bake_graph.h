@@ -1,5 +1,5 @@
 /// @file bake_graph.h
-/// @brief The bake as a graph of jobs: boundary → simulate → surface → cleanup (→ preview), one job
+/// @brief The bake as a graph of jobs: boundary → sim → surface → clean (→ preview), one job
 /// per frame for the per-frame stages. Each job knows its command, the scene sections it reads and
 /// its input and output files; bake_runner.h decides which are stale and runs them.
 #pragma once
@@ -15,10 +15,12 @@
 namespace rime::bake {
 
 /// In pipeline order: a target runs every stage up to and including it.
-enum class Stage { kBoundary = 0, kSim = 1, kSurface = 2, kCleanup = 3, kPreview = 4 };
+enum class Stage { kBoundary = 0, kSim = 1, kSurface = 2, kClean = 3, kPreview = 4 };
 constexpr int kStageCount = 5;
 const char* StageName(Stage stage);
-std::optional<Stage> ParseStage(const std::string& name);  // also accepts "simulate", "clean"
+/// A stage by its name; nullopt for an unknown name. A former name (cleanup, simulate, simulation)
+/// is a usage error naming the current one.
+std::optional<Stage> ParseStage(const std::string& name);
 
 struct Job {
   Stage stage = Stage::kBoundary;

@@ -49,7 +49,7 @@ void RequireInSandbox(const Sandbox& sandbox, const Job& job, const GraphOptions
 
 int main(int argc, char** argv) {
   CLI::App app{
-      "Bakes a scene: boundary -> sim -> surface -> cleanup (-> preview), rerunning only the jobs whose tool, command, scene "
+      "Bakes a scene: boundary -> sim -> surface -> clean (-> preview), rerunning only the jobs whose tool, command, scene "
       "sections or input files changed. Outputs go to <output>/surface, <output>/clean and <output>/preview; particles, "
       "logs and the bake state to <output>/cache."};
   tool::CommonOptions common;
@@ -66,7 +66,7 @@ int main(int argc, char** argv) {
   bool force = false, dry_run = false, explain = false, clean = false;
   app.add_option("scene", scene_file, "Scene file (TOML)")->required();
   app.add_option("target", target_name,
-                 "Last stage to bring up to date: boundary, sim, surface, cleanup, preview or all (= preview; skipped without Blender)")
+                 "Last stage to bring up to date: boundary, sim, surface, clean, preview or all (= preview; skipped without Blender)")
       ->capture_default_str();
   app.add_option("--only", only_name, "Rerun just this stage on cached inputs; refused when they are missing or stale (see --force)");
   app.add_flag("--force", force, "Rerun the selected jobs even when up to date; with --only, accept stale inputs");
@@ -110,11 +110,11 @@ int main(int argc, char** argv) {
       }
     }
     const auto target = ParseStage(target_name == "all" ? "preview" : target_name);
-    if (!target) throw Error(ExitCode::kUsage, fmt::format("unknown target '{}' (boundary, sim, surface, cleanup, preview, all)", target_name));
+    if (!target) throw Error(ExitCode::kUsage, fmt::format("unknown target '{}' (boundary, sim, surface, clean, preview, all)", target_name));
     std::optional<Stage> only;
     if (!only_name.empty()) {
       only = ParseStage(only_name);
-      if (!only) throw Error(ExitCode::kUsage, fmt::format("unknown stage '{}' for --only (boundary, sim, surface, cleanup, preview)", only_name));
+      if (!only) throw Error(ExitCode::kUsage, fmt::format("unknown stage '{}' for --only (boundary, sim, surface, clean, preview)", only_name));
     }
 
     const Sandbox sandbox = tool::MakeSandbox(common);

@@ -1,5 +1,5 @@
 // rime-bake's decisions (what is stale, what runs, what it reports), tested by running the real
-// rime-bake binary on fake stage tools (fake_tools.h) that log every invocation.
+// rime-bake binary on fake stage tools (rime/test/fake_tools.h) that log every invocation.
 #include <cstdlib>
 #include <gtest/gtest.h>
 #include <signal.h>
@@ -19,8 +19,8 @@
 #include <sstream>
 #include <thread>
 
-#include "bake_outputs.h"
-#include "fake_tools.h"
+#include "rime/test/bake_outputs.h"
+#include "rime/test/fake_tools.h"
 #include "farm.h"
 #include "rime/core/error.h"
 #include "rime/io/scene.h"
@@ -31,17 +31,11 @@ extern char** environ;
 namespace rime::bake {
 namespace {
 
-constexpr int kLastFrame = testing::kFakeLastFrame;
-const char* const kScene = testing::kFakeScene;
+constexpr int kLastFrame = test::kFakeLastFrame;
+const char* const kScene = test::kFakeScene;
 
-std::string ReadFile(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  std::stringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
-
-void WriteFile(const fs::path& p, const std::string& text) { std::ofstream(p, std::ios::binary) << text; }
+using test::ReadFile;
+using test::WriteFile;
 
 class Bake : public ::testing::Test {
  protected:
@@ -50,7 +44,7 @@ class Bake : public ::testing::Test {
     root_ = fs::temp_directory_path() / (std::string("rime_bake_test_") + info->name() + "_" + std::to_string(getpid()));
     fs::remove_all(root_);
     fs::create_directories(root_);
-    testing::WriteFakeTools(root_ / "tools");
+    test::WriteFakeTools(root_ / "tools");
     scene_ = root_ / "scene.toml";
     WriteFile(scene_, kScene);
     setenv("FAKE_LOG", (root_ / "invocations.log").c_str(), 1);
@@ -66,7 +60,7 @@ class Bake : public ::testing::Test {
   }
   /// Puts a fake blender and ffmpeg first on PATH (until TearDown) and lets rime-bake use them.
   void UseFakePreviewTools() {
-    testing::WriteFakePreviewTools(root_ / "preview_tools");
+    test::WriteFakePreviewTools(root_ / "preview_tools");
     saved_path_ = getenv("PATH");
     setenv("PATH", ((root_ / "preview_tools").string() + ":" + saved_path_).c_str(), 1);
     unsetenv("RIME_BLENDER");
@@ -133,7 +127,7 @@ TEST_F(Bake, FirstRunBakesEverythingAndSecondRunExecutesNothing) {
   }
   EXPECT_TRUE(fs::exists(Out() / "cache/.rime-bake/state.json"));
   EXPECT_TRUE(fs::is_empty(Out() / "cache/.rime-bake/incomplete"));
-  EXPECT_NE(output_.find("cleanup"), std::string::npos) << "summary table expected:\n" << output_;
+  EXPECT_NE(output_.find("clean"), std::string::npos) << "summary table expected:\n" << output_;
   if (std::system("command -v blender > /dev/null 2>&1") != 0)
     EXPECT_NE(output_.find("preview stage skipped: blender is not on PATH"), std::string::npos) << output_;
 
@@ -169,10 +163,10 @@ TEST_F(Bake, ChangingASurfaceParameterRerunsSurfaceAndCleanupOnly) {
 TEST_F(Bake, ChangingACleanupParameterRerunsCleanupOnly) {
   const std::string key = "max_hole_edges = 100";
   ASSERT_EQ(RunBake(), 0) << output_;
-  WriteFile(scene_, ReadFile(scene_) + "\n[cleanup]\n" + key + "\n");
+  WriteFile(scene_, ReadFile(scene_) + "\n[clean]\n" + key + "\n");
   ASSERT_EQ(RunBake("--explain"), 0) << output_;
   EXPECT_EQ(Invocations(), (Counts{{"rime-clean", kLastFrame + 1}})) << output_;
-  EXPECT_NE(output_.find("scene section [cleanup] changed"), std::string::npos) << output_;
+  EXPECT_NE(output_.find("scene section [clean] changed"), std::string::npos) << output_;
 }
 
 TEST_F(Bake, SurfaceOutputsFollowTheSurfacePhaseAndFormats) {
@@ -201,7 +195,7 @@ TEST_F(Bake, FrameWithoutIceHasNothingToClean) {
   ASSERT_EQ(RunBake(), 0) << output_;
   EXPECT_EQ(Invocations(), (Counts{{"rime-boundary", 1}, {"rime-sim", 1}, {"rime-surface", kLastFrame + 1}, {"rime-clean", kLastFrame}}))
       << output_;
-  EXPECT_NE(output_.find("cleanup: 1 of the frames that ran had an empty mesh"), std::string::npos) << output_;
+  EXPECT_NE(output_.find("clean: 1 of the frames that ran had an empty mesh"), std::string::npos) << output_;
   EXPECT_FALSE(fs::exists(Out() / "clean/ice_clean.0000.obj"));
   ASSERT_EQ(RunBake(), 0) << output_;
   EXPECT_TRUE(Invocations().empty()) << output_;
@@ -220,7 +214,7 @@ TEST_F(Bake, RerunWithIdenticalOutputCutsOffDownstream) {
   EditScene("omega = 0.5", "omega = 0.6");
   ASSERT_EQ(RunBake("--explain"), 0) << output_;
   EXPECT_EQ(Invocations(), (Counts{{"rime-sim", 1}})) << output_;
-  EXPECT_NE(output_.find("scene section [simulation] changed"), std::string::npos) << output_;
+  EXPECT_NE(output_.find("scene section [sim] changed"), std::string::npos) << output_;
   // An edited output reruns the job that wrote it; its restored content cuts cleanup off.
   WriteFile(Out() / "surface/ice.0001.obj", "edited by hand\n");
   ASSERT_EQ(RunBake(), 0) << output_;
@@ -243,9 +237,9 @@ TEST_F(Bake, ChangingAToolRerunsItsStage) {
 
 TEST_F(Bake, OnlyCleanupRerunsCleanupAlone) {
   ASSERT_EQ(RunBake(), 0) << output_;
-  ASSERT_EQ(RunBake("--only cleanup"), 0) << output_;
+  ASSERT_EQ(RunBake("--only clean"), 0) << output_;
   EXPECT_EQ(Invocations(), (Counts{{"rime-clean", kLastFrame + 1}})) << output_;
-  ASSERT_EQ(RunBake("--only cleanup --frames 1-2"), 0) << output_;
+  ASSERT_EQ(RunBake("--only clean --frames 1-2"), 0) << output_;
   EXPECT_EQ(Invocations(), (Counts{{"rime-clean", 2}})) << output_;
 }
 
@@ -257,21 +251,21 @@ TEST_F(Bake, OnlyRefusesMissingOrStaleInputsUnlessForced) {
 
   ASSERT_EQ(RunBake(), 0) << output_;
   EditScene("spacing = 0.05", "spacing = 0.04");  // boundary and sim are now stale
-  EXPECT_EQ(RunBake("--only cleanup"), 8) << output_;
+  EXPECT_EQ(RunBake("--only clean"), 8) << output_;
   EXPECT_NE(output_.find("stale"), std::string::npos) << output_;
   EXPECT_TRUE(Invocations().empty());
-  ASSERT_EQ(RunBake("--only cleanup --force"), 0) << output_;
+  ASSERT_EQ(RunBake("--only clean --force"), 0) << output_;
   EXPECT_EQ(Invocations(), (Counts{{"rime-clean", kLastFrame + 1}})) << output_;
 }
 
 TEST_F(Bake, IncompleteMarkerForcesARerun) {
   ASSERT_EQ(RunBake(), 0) << output_;
-  WriteFile(Out() / "cache/.rime-bake/incomplete/cleanup.0002", "interrupted");
+  WriteFile(Out() / "cache/.rime-bake/incomplete/clean.0002", "interrupted");
   ASSERT_EQ(RunBake("--explain"), 0) << output_;
   EXPECT_EQ(InvocationLines().size(), 1u) << output_;
   EXPECT_EQ(Invocations(), (Counts{{"rime-clean", 1}})) << output_;
   EXPECT_NE(output_.find("incomplete"), std::string::npos) << output_;
-  EXPECT_FALSE(fs::exists(Out() / "cache/.rime-bake/incomplete/cleanup.0002"));
+  EXPECT_FALSE(fs::exists(Out() / "cache/.rime-bake/incomplete/clean.0002"));
 }
 
 TEST_F(Bake, FailingStageReportsStageFrameAndLog) {
@@ -356,7 +350,7 @@ TEST_F(Bake, DryRunPrintsCommandsAndRunsNothing) {
   EditScene("omega = 0.5", "omega = 0.6");
   ASSERT_EQ(RunBake("--dry-run --explain"), 0) << output_;
   EXPECT_TRUE(Invocations().empty());
-  EXPECT_NE(output_.find("# sim: scene section [simulation] changed"), std::string::npos) << output_;
+  EXPECT_NE(output_.find("# sim: scene section [sim] changed"), std::string::npos) << output_;
   EXPECT_NE(output_.find("# surface.0000: after sim reruns"), std::string::npos) << output_;
 }
 
@@ -367,6 +361,14 @@ TEST_F(Bake, TargetStopsAtItsStageAndCleanRemovesEverything) {
   ASSERT_EQ(RunBake("--clean"), 0) << output_;
   EXPECT_FALSE(fs::exists(Out()));
   EXPECT_EQ(RunBake("nonsense"), 2) << output_;
+}
+
+TEST_F(Bake, FormerStageNamesAreRefusedNamingTheCurrentOne) {
+  EXPECT_EQ(RunBake("cleanup"), 2) << output_;
+  EXPECT_NE(output_.find("stage 'cleanup' is now called 'clean'"), std::string::npos) << output_;
+  EXPECT_EQ(RunBake("--only simulate"), 2) << output_;
+  EXPECT_NE(output_.find("stage 'simulate' is now called 'sim'"), std::string::npos) << output_;
+  EXPECT_EQ(Invocations(), Counts{}) << output_;
 }
 
 TEST_F(Bake, PreviewRendersEveryCleanedFrameWhenBlenderIsOnPath) {
@@ -533,7 +535,7 @@ TEST_F(Bake, StageToolThatCannotWriteMakesTheBakeExit5NamingTheFile) {
 }
 
 TEST_F(Bake, MemoryBudgetReachesEveryToolAsItsShareAndChangesNoKey) {
-  ASSERT_EQ(RunBake("cleanup -j 2 --memory-budget 4G"), 0) << output_;
+  ASSERT_EQ(RunBake("clean -j 2 --memory-budget 4G"), 0) << output_;
   int surfaces = 0, cleanups = 0;
   for (const std::string& line : InvocationLines()) {
     const std::string tool = line.substr(0, line.find(' '));
@@ -545,25 +547,25 @@ TEST_F(Bake, MemoryBudgetReachesEveryToolAsItsShareAndChangesNoKey) {
   EXPECT_EQ(surfaces, kLastFrame + 1);
   EXPECT_EQ(cleanups, kLastFrame + 1);
   // A budget does not change what a tool computes: another one, or none, reruns nothing.
-  ASSERT_EQ(RunBake("cleanup --memory-budget 1G"), 0) << output_;
+  ASSERT_EQ(RunBake("clean --memory-budget 1G"), 0) << output_;
   EXPECT_TRUE(Invocations().empty()) << output_;
-  ASSERT_EQ(RunBake("cleanup"), 0) << output_;
+  ASSERT_EQ(RunBake("clean"), 0) << output_;
   EXPECT_TRUE(Invocations().empty()) << output_;
-  EXPECT_EQ(RunBake("cleanup --memory-budget 4X"), 2) << output_;
+  EXPECT_EQ(RunBake("clean --memory-budget 4X"), 2) << output_;
   EXPECT_NE(output_.find("--memory-budget 4X"), std::string::npos) << output_;
 }
 
 TEST_F(Bake, StageToolOverItsMemoryBudgetMakesTheBakeExit10) {
   setenv("FAKE_FAIL", "surface:1", 1);
   setenv("FAKE_FAIL_CODE", "10", 1);
-  EXPECT_EQ(RunBake("cleanup --memory-budget 1G"), 10) << output_;
+  EXPECT_EQ(RunBake("clean --memory-budget 1G"), 10) << output_;
   unsetenv("FAKE_FAIL");
   unsetenv("FAKE_FAIL_CODE");
   EXPECT_NE(output_.find("rime-bake: error: stage surface failed on frame 1 (rime-surface exited with code 10: rime-surface: error: "
                          "needs about 2 GiB for 100 M voxels"),
             std::string::npos)
       << output_;
-  EXPECT_EQ(RunBake("cleanup"), 0) << output_;
+  EXPECT_EQ(RunBake("clean"), 0) << output_;
 }
 
 TEST_F(Bake, SandboxRefusesPathsOutsideItBeforeWritingAnything) {
@@ -572,7 +574,7 @@ TEST_F(Bake, SandboxRefusesPathsOutsideItBeforeWritingAnything) {
   WriteFile(outside / "rock.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
   WriteFile(root_ / "rock.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
   // Up to the cleanup: the preview stage would run a real Blender where one is installed.
-  const std::string sandbox = "cleanup --sandbox '" + root_.string() + "'";
+  const std::string sandbox = "clean --sandbox '" + root_.string() + "'";
   const auto expect_refused = [&](int code, const std::string& names) {
     EXPECT_EQ(RunBake(sandbox), code) << output_;
     EXPECT_NE(output_.find(names), std::string::npos) << output_;

@@ -1,5 +1,5 @@
 // End to end with the real stage tools: bake a tiny procedural scene with rime-bake, then check
-// what a second run, a touched file, a changed [surface] value and `--only cleanup` rerun (from
+// what a second run, a touched file, a changed [surface] value and `--only clean` rerun (from
 // rime-bake's JSON summary), and that a bake killed during the simulation resumes and ends with
 // the same frames as an uninterrupted one.
 #include <gtest/gtest.h>
@@ -19,7 +19,8 @@
 #include "rime/core/error.h"
 #include "rime/io/particles.h"
 #include "rime/io/scene.h"
-#include "small_bake_scene.h"
+#include "rime/test/files.h"
+#include "rime/test/small_bake_scene.h"
 
 namespace fs = std::filesystem;
 extern char** environ;
@@ -30,12 +31,7 @@ namespace {
 constexpr int kLastFrame = 10;
 const std::string kScene = test::SmallBakeScene("e2e", kLastFrame);
 
-std::string ReadFile(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  std::stringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
+using test::ReadFile;
 
 class BakeEndToEnd : public ::testing::Test {
  protected:
@@ -83,44 +79,44 @@ class BakeEndToEnd : public ::testing::Test {
 
 TEST_F(BakeEndToEnd, RerunsOnlyWhatChanged) {
   // 1. A fresh bake runs every job; a second run executes nothing.
-  ASSERT_EQ(RunBake(Baked(), "cleanup"), 0) << output_;
+  ASSERT_EQ(RunBake(Baked(), "clean"), 0) << output_;
   EXPECT_EQ(Ran("boundary"), 1);
   EXPECT_EQ(Ran("sim"), 1);
   EXPECT_EQ(Ran("surface"), kLastFrame + 1);
-  EXPECT_EQ(Ran("cleanup"), kLastFrame + 1);
+  EXPECT_EQ(Ran("clean"), kLastFrame + 1);
   for (int f = 0; f <= kLastFrame; ++f) {
     EXPECT_TRUE(fs::exists(io::FramePath(Baked() / "cache/sim", "particles", f, "h5part"))) << f;
     EXPECT_TRUE(fs::exists(io::FramePath(Baked() / "surface", "water", f, "vdb"))) << f;
     EXPECT_GT(fs::file_size(io::FramePath(Baked() / "clean", "water_clean", f, "obj")), 0u) << f;
   }
-  ASSERT_EQ(RunBake(Baked(), "cleanup"), 0) << output_;
+  ASSERT_EQ(RunBake(Baked(), "clean"), 0) << output_;
   EXPECT_EQ(TotalRan(), 0) << output_;
 
   // 2. Touching files without changing them reruns nothing.
   for (const fs::path& p : {root_ / "e2e.toml", Baked() / "cache/sim/particles.0003.h5part", Baked() / "surface/water.0002.obj",
                             Baked() / "cache/boundary/ball.h5part"})
     fs::last_write_time(p, fs::last_write_time(p) + std::chrono::seconds(3));
-  ASSERT_EQ(RunBake(Baked(), "cleanup"), 0) << output_;
+  ASSERT_EQ(RunBake(Baked(), "clean"), 0) << output_;
   EXPECT_EQ(TotalRan(), 0) << output_;
 
-  // 3. --only cleanup reruns cleanup alone.
-  ASSERT_EQ(RunBake(Baked(), "--only cleanup"), 0) << output_;
-  EXPECT_EQ(Ran("cleanup"), kLastFrame + 1);
+  // 3. --only clean reruns cleanup alone.
+  ASSERT_EQ(RunBake(Baked(), "--only clean"), 0) << output_;
+  EXPECT_EQ(Ran("clean"), kLastFrame + 1);
   EXPECT_EQ(TotalRan(), kLastFrame + 1);
 
   // 4. A changed [surface] value reruns surface and cleanup only.
   std::ofstream(root_ / "e2e.toml", std::ios::app) << "voxel_ratio = 0.4\n";  // appended to [surface]
-  ASSERT_EQ(RunBake(Baked(), "cleanup --explain"), 0) << output_;
+  ASSERT_EQ(RunBake(Baked(), "clean --explain"), 0) << output_;
   EXPECT_EQ(Ran("boundary"), 0);
   EXPECT_EQ(Ran("sim"), 0);
   EXPECT_EQ(Ran("surface"), kLastFrame + 1);
-  EXPECT_EQ(Ran("cleanup"), kLastFrame + 1);  // a different voxel size changes every mesh
+  EXPECT_EQ(Ran("clean"), kLastFrame + 1);  // a different voxel size changes every mesh
 }
 
 TEST_F(BakeEndToEnd, KilledDuringSimulationResumesToTheSameFrames) {
-  ASSERT_EQ(RunBake(Baked(), "cleanup"), 0) << output_;  // the uninterrupted reference
+  ASSERT_EQ(RunBake(Baked(), "clean"), 0) << output_;  // the uninterrupted reference
   const fs::path out = root_ / "out_killed";
-  auto args = Args(out, "cleanup -q");
+  auto args = Args(out, "clean -q");
   std::vector<char*> argv;
   for (auto& a : args) argv.push_back(a.data());
   argv.push_back(nullptr);
@@ -136,7 +132,7 @@ TEST_F(BakeEndToEnd, KilledDuringSimulationResumesToTheSameFrames) {
   if (fs::exists(io::FramePath(out / "cache/sim", "particles", kLastFrame, "h5part")))
     GTEST_SKIP() << "the simulation finished before it could be killed; nothing to resume";
 
-  ASSERT_EQ(RunBake(out, "cleanup --explain"), 0) << output_;
+  ASSERT_EQ(RunBake(out, "clean --explain"), 0) << output_;
   EXPECT_NE(ReadFile(out / "cache/logs/sim.log").find("--resume"), std::string::npos) << "the rerun must resume, not restart";
   EXPECT_EQ(Ran("boundary"), 0) << output_;
   for (int f = 0; f <= kLastFrame; ++f) {

@@ -10,8 +10,8 @@
 #include <filesystem>
 #include <fmt/format.h>
 
-#include "bake_outputs.h"
-#include "small_bake_scene.h"
+#include "rime/test/bake_outputs.h"
+#include "rime/test/small_bake_scene.h"
 
 namespace fs = std::filesystem;
 
@@ -44,7 +44,7 @@ class FullDisk : public ::testing::Test {
     if (::testing::UnitTest::GetInstance()->failed_test_count() == 0) fs::remove_all(root_);
   }
   static constexpr std::pair<const char*, const char*> kStages[] = {
-      {"boundary", "rime-boundary"}, {"sim", "rime-sim"}, {"surface", "rime-surface"}, {"cleanup", "rime-clean"}};
+      {"boundary", "rime-boundary"}, {"sim", "rime-sim"}, {"surface", "rime-surface"}, {"clean", "rime-clean"}};
   // Each stage tool behind a wrapper that applies RIME_TEST_FSIZE_<stage> (KiB) when set; the
   // wrappers do not change between runs, so neither do the jobs' keys.
   static fs::path LimitedTools() {
@@ -58,7 +58,7 @@ class FullDisk : public ::testing::Test {
     return tools;
   }
   static std::vector<std::string> Args(const fs::path& out, const fs::path& tools) {
-    return {RIME_BINARY_DIR "/bin/rime-bake", (root_ / "disk.toml").string(), "cleanup", "-o", out.string(), "--tools", tools.string(), "-q"};
+    return {RIME_BINARY_DIR "/bin/rime-bake", (root_ / "disk.toml").string(), "clean", "-o", out.string(), "--tools", tools.string(), "-q"};
   }
   static void ExpectNothingDamaged(const fs::path& out, const std::string& when) {
     for (const std::string& problem : test::PartialFiles(out, reference_)) ADD_FAILURE() << when << ": " << problem;
@@ -137,7 +137,7 @@ TEST_F(FullDisk, TooSmallFilesystemFailsCleanlyAndTheBakeFinishesOnceThereIsRoom
     ASSERT_EQ(errors.size(), 1u) << options << ": one error line expected:\n" << output;
     EXPECT_NE(errors.front().find("No space left on device"), std::string::npos) << errors.front();
     EXPECT_NE(errors.front().find(mount_point.string() + "/"), std::string::npos) << "the message must name the file: " << errors.front();
-    for (const char* stage : {"boundary", "sim", "surface", "cleanup"})
+    for (const char* stage : {"boundary", "sim", "surface", "clean"})
       if (errors.front().find(fmt::format("stage {} ", stage)) != std::string::npos) stages_hit.insert(stage);
     std::printf("tmpfs %s (%.0f%% of the bake): %s\n", options.c_str(), 100 * share, errors.front().c_str());
     ExpectNothingDamaged(out, options);

@@ -7,9 +7,9 @@
 #include <filesystem>
 #include <fmt/format.h>
 
-#include "bake_outputs.h"
+#include "rime/test/bake_outputs.h"
 #include "rime/io/particles.h"
-#include "small_bake_scene.h"
+#include "rime/test/small_bake_scene.h"
 
 namespace fs = std::filesystem;
 
@@ -65,7 +65,7 @@ TEST_F(HostileNames, BakeWorksUnderTheLiteralNamesAndRunsNothingInjected) {
   std::ofstream(scene) << SceneNamed(TomlString(hostile), TomlString(hostile), 1);
   const fs::path out = root_ / ("out " + hostile);
   std::string output;
-  const int code = test::Run({RIME_BINARY_DIR "/bin/rime-bake", scene.string(), "cleanup", "-o", out.string(), "-j", "2", "-q"},
+  const int code = test::Run({RIME_BINARY_DIR "/bin/rime-bake", scene.string(), "clean", "-o", out.string(), "-j", "2", "-q"},
                              root_ / "bake.txt", output);
   ASSERT_EQ(code, 0) << output;
   ExpectNoInjectedCommandRan();
@@ -75,7 +75,7 @@ TEST_F(HostileNames, BakeWorksUnderTheLiteralNamesAndRunsNothingInjected) {
     EXPECT_GT(fs::file_size(io::FramePath(out / "clean", "water_clean", f, "obj")), 0u) << f;
   }
   // A dry run prints every command shell-quoted: pasted into a shell they run nothing else.
-  ASSERT_EQ(test::Run({RIME_BINARY_DIR "/bin/rime-bake", scene.string(), "cleanup", "-o", (root_ / "dry").string(), "-n", "-q"}, root_ / "dry.txt",
+  ASSERT_EQ(test::Run({RIME_BINARY_DIR "/bin/rime-bake", scene.string(), "clean", "-o", (root_ / "dry").string(), "-n", "-q"}, root_ / "dry.txt",
                       output),
             0)
       << output;
@@ -107,7 +107,7 @@ TEST_F(HostileNames, NamesThatLeaveTheirFolderAreRefused) {
     const fs::path scene = root_ / "refused.toml";
     std::ofstream(scene) << SceneNamed(scene_name, ball_name, 1);
     std::string output;
-    const int code = test::Run({RIME_BINARY_DIR "/bin/rime-bake", scene.string(), "cleanup", "-o", (root_ / "out").string(), "-q"},
+    const int code = test::Run({RIME_BINARY_DIR "/bin/rime-bake", scene.string(), "clean", "-o", (root_ / "out").string(), "-q"},
                                root_ / "bake.txt", output);
     EXPECT_EQ(code, 3) << output;
     EXPECT_NE(output.find("cannot be used as a file name"), std::string::npos) << output;

@@ -14,9 +14,9 @@
 #include <set>
 #include <sys/stat.h>
 
-#include "bake_outputs.h"
+#include "rime/test/bake_outputs.h"
 #include "rime/io/particles.h"
-#include "small_bake_scene.h"
+#include "rime/test/small_bake_scene.h"
 
 namespace fs = std::filesystem;
 using Clock = std::chrono::steady_clock;
@@ -90,7 +90,7 @@ class KillTorture : public ::testing::Test {
 
   static fs::path Reference() { return root_ / "reference"; }
   static std::vector<std::string> Args(const fs::path& out) {
-    return {RIME_BINARY_DIR "/bin/rime-bake", (root_ / "torture.toml").string(), "cleanup", "-o", out.string(), "-j", "2", "-q"};
+    return {RIME_BINARY_DIR "/bin/rime-bake", (root_ / "torture.toml").string(), "clean", "-o", out.string(), "-j", "2", "-q"};
   }
 
   static void ExpectNothingPartial(const fs::path& out, const std::string& when) {
@@ -205,7 +205,7 @@ TEST_F(KillTorture, SurvivesKillsAtSeededMomentsWithIdenticalOutputs) {
   for (const auto& [name, bytes] : reference_)
     if (!fs::exists(out / name)) ADD_FAILURE() << "missing: " << name;
   EXPECT_TRUE(fs::is_empty(out / "cache/.rime-bake/incomplete"));
-  EXPECT_EQ(test::Run({RIME_BINARY_DIR "/bin/rime-bake", (root_ / "torture.toml").string(), "cleanup", "-o", out.string(), "-n"},
+  EXPECT_EQ(test::Run({RIME_BINARY_DIR "/bin/rime-bake", (root_ / "torture.toml").string(), "clean", "-o", out.string(), "-n"},
                       root_ / "dry.txt", output),
             0);
   EXPECT_NE(output.find("0 jobs would run"), std::string::npos) << output;

@@ -17,7 +17,7 @@
 #include "rime/core/error.h"
 #include "rime/exec/device.h"
 #include "rime/sph/simulation.h"
-#include "../../libs/sph/tests/test_scenes.h"
+#include "rime/test/sph_scenes.h"
 
 
 namespace rime {
@@ -215,7 +215,7 @@ TEST(ExtremesFixedStep, BeyondTheCflLimitIsStableOrDiagnosed) {
 TEST(ExtremesAdaptiveStep, CflOfOneIsRefusedDiagnosedOrStable) {
   io::Scene scene = PlateScene(50);
   try {
-    scene.solver.cfl = io::ParseScene("[simulation]\ncfl = 1.0\n", "cfl.toml").solver.cfl;
+    scene.solver.cfl = io::ParseScene("[sim]\ncfl = 1.0\n", "cfl.toml").solver.cfl;
   } catch (const Error& e) {
     std::printf("cfl = 1: %s\n", e.what());
     EXPECT_EQ(e.code(), ExitCode::kBadInput);

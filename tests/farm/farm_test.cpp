@@ -1,4 +1,4 @@
-// rime-bake --farm on a real single-node Slurm cluster on localhost (local_slurm.h): a farm bake
+// rime-bake --farm on a real single-node Slurm cluster on localhost (rime/test/local_slurm.h): a farm bake
 // writes the same bytes as a local bake (reports: the same apart from timings) and leaves a state both agree is up to date; a failed frame
 // is reported with its log and resubmitted alone; a cancelled bake leaves no job and nothing that
 // looks finished. The settings and --dry-run checks need no cluster.
@@ -18,10 +18,10 @@
 #include <sstream>
 #include <thread>
 
-#include "bake_outputs.h"
-#include "fake_tools.h"
-#include "local_slurm.h"
-#include "small_bake_scene.h"
+#include "rime/test/bake_outputs.h"
+#include "rime/test/fake_tools.h"
+#include "rime/test/local_slurm.h"
+#include "rime/test/small_bake_scene.h"
 
 namespace fs = std::filesystem;
 using nlohmann::json;
@@ -31,8 +31,8 @@ namespace {
 
 const std::string kRealScene = test::SmallBakeScene("farm", 5);
 
-using bake::testing::kFakeLastFrame;
-using bake::testing::kFakeScene;
+using test::kFakeLastFrame;
+using test::kFakeScene;
 
 constexpr auto kFarmTimeout = std::chrono::seconds(150);
 
@@ -41,7 +41,7 @@ using test::ReadFile;
 
 class Farm : public ::testing::Test {
  protected:
-  static inline testing::LocalSlurm* cluster_ = nullptr;
+  static inline test::LocalSlurm* cluster_ = nullptr;
   static inline std::string cluster_problem_;
 
   static void TearDownTestSuite() {
@@ -56,7 +56,7 @@ class Farm : public ::testing::Test {
     root_ = fs::temp_directory_path() / fmt::format("rime_farm_{}_{}", ::testing::UnitTest::GetInstance()->current_test_info()->name(), getpid());
     fs::remove_all(root_);
     fs::create_directories(root_);
-    bake::testing::WriteFakeTools(root_ / "tools");
+    test::WriteFakeTools(root_ / "tools");
     std::ofstream(root_ / "real.toml") << kRealScene;
     std::ofstream(root_ / "fake.toml") << kFakeScene;
     // Two frames per array task; the simulation takes one CPU so a surface task can run beside it,
@@ -77,11 +77,11 @@ class Farm : public ::testing::Test {
   /// Starts the cluster once for the whole suite; the caller skips when Slurm is not installed.
   static bool ClusterUp() {
     if (cluster_) return true;
-    if (const auto missing = testing::LocalSlurm::MissingBinary()) {
+    if (const auto missing = test::LocalSlurm::MissingBinary()) {
       cluster_problem_ = fmt::format("Slurm is not installed ({} not found; Debian: apt install slurm-wlm)", *missing);
       return false;
     }
-    cluster_ = new testing::LocalSlurm;
+    cluster_ = new test::LocalSlurm;
     const std::string problem = cluster_->Start(ClusterFolder());
     if (!problem.empty()) {
       delete cluster_;
@@ -117,7 +117,7 @@ class Farm : public ::testing::Test {
       std::this_thread::sleep_for(std::chrono::seconds(1));
     }
     ADD_FAILURE() << "the farm bake did not finish within " << kFarmTimeout.count() << " s:\n"
-                  << output_ << testing::LocalSlurm::Capture("squeue 2>&1");
+                  << output_ << test::LocalSlurm::Capture("squeue 2>&1");
     return summary_;
   }
 
@@ -162,7 +162,7 @@ TEST_F(Farm, HostileNamesReachSbatchAsLiteralArguments) {
   std::ofstream(root_ / "hostile.toml") << scene;
   const fs::path out = root_ / ("out " + hostile);
   std::string printed;
-  ASSERT_EQ(test::Run({RIME_BINARY_DIR "/bin/rime-bake", (root_ / "hostile.toml").string(), "cleanup", "-o", out.string(), "--tools",
+  ASSERT_EQ(test::Run({RIME_BINARY_DIR "/bin/rime-bake", (root_ / "hostile.toml").string(), "clean", "-o", out.string(), "--tools",
                        (root_ / "tools").string(), "--farm", "slurm", "--dry-run", "-q"},
                       root_ / "dry.txt", printed),
             0)
@@ -187,7 +187,7 @@ TEST_F(Farm, HostileNamesReachSbatchAsLiteralArguments) {
 // Settings errors name file, line and key; the dry run shows the sbatch commands (arrays chained
 // per frame, the surface array streaming the simulation's frames) without any cluster.
 TEST_F(Farm, DryRunShowsTheJobChainAndSettingsAreValidated) {
-  ASSERT_EQ(RunBake("fake.toml", root_ / "out", "cleanup --farm slurm --dry-run --explain --farm-config " + (root_ / "site.toml").string(), true), 0)
+  ASSERT_EQ(RunBake("fake.toml", root_ / "out", "clean --farm slurm --dry-run --explain --farm-config " + (root_ / "site.toml").string(), true), 0)
       << output_;
   EXPECT_NE(output_.find("# surface.0003: "), std::string::npos) << output_;
   EXPECT_NE(output_.find("--array=0-1%1"), std::string::npos) << output_;  // 4 frames, 2 per task; 1 may wait for frames
@@ -201,9 +201,9 @@ TEST_F(Farm, DryRunShowsTheJobChainAndSettingsAreValidated) {
   EXPECT_EQ(output_.find("--memory-budget"), std::string::npos) << output_;
 
   // A memory budget and a sandbox given at submission reach every task's command line.
-  ASSERT_EQ(RunBake("fake.toml", root_ / "out", "cleanup --farm slurm --dry-run --memory-budget 2G --sandbox '" + root_.string() + "'", true), 0)
+  ASSERT_EQ(RunBake("fake.toml", root_ / "out", "clean --farm slurm --dry-run --memory-budget 2G --sandbox '" + root_.string() + "'", true), 0)
       << output_;
-  for (const char* group : {"boundary", "sim", "surface", "cleanup"}) {
+  for (const char* group : {"boundary", "sim", "surface", "clean"}) {
     const auto at = output_.find(fmt::format("--farm-task {} ", group));
     ASSERT_NE(at, std::string::npos) << group << "\n" << output_;
     const std::string line = output_.substr(at, output_.find('\n', at) - at);
@@ -228,13 +228,13 @@ TEST_F(Farm, DryRunShowsTheJobChainAndSettingsAreValidated) {
 
   // The scene's [farm] keys override the site file's.
   std::ofstream(root_ / "own_chunk.toml") << kFakeScene << "\n[farm]\nchunk = 1\n";
-  ASSERT_EQ(RunBake("own_chunk.toml", root_ / "out", "cleanup --farm slurm --dry-run --farm-config " + (root_ / "site.toml").string(), true), 0)
+  ASSERT_EQ(RunBake("own_chunk.toml", root_ / "out", "clean --farm slurm --dry-run --farm-config " + (root_ / "site.toml").string(), true), 0)
       << output_;
   EXPECT_NE(output_.find("--array=0-3%1"), std::string::npos) << output_;  // the site file's stream_tasks stays
   EXPECT_NE(output_.find("--time=10"), std::string::npos) << output_;
   // Without streaming the surface array waits for the simulation to succeed.
   std::ofstream(root_ / "no_stream.toml") << kFakeScene << "\n[farm]\nstream_tasks = 0\n";
-  ASSERT_EQ(RunBake("no_stream.toml", root_ / "out", "cleanup --farm slurm --dry-run", true), 0) << output_;
+  ASSERT_EQ(RunBake("no_stream.toml", root_ / "out", "clean --farm slurm --dry-run", true), 0) << output_;
   EXPECT_NE(output_.find("'--dependency=afterok:<sim job>'"), std::string::npos) << output_;
   EXPECT_EQ(output_.find("--farm-sim-job"), std::string::npos) << output_;
 
@@ -294,9 +294,9 @@ TEST_F(Farm, TaskRunsItsChunkAndLocalBakeAdoptsItsRecords) {
 
 TEST_F(Farm, BakeMatchesALocalBakeByteForByte) {
   if (!ClusterUp()) GTEST_SKIP() << cluster_problem_;
-  ASSERT_EQ(RunBake("real.toml", root_ / "local", "cleanup -j 2", false), 0) << output_;
+  ASSERT_EQ(RunBake("real.toml", root_ / "local", "clean -j 2", false), 0) << output_;
 
-  const std::string farm = "cleanup --farm-config " + (root_ / "site.toml").string();
+  const std::string farm = "clean --farm-config " + (root_ / "site.toml").string();
   ASSERT_EQ(RunBake("real.toml", root_ / "farm", farm + " --farm slurm", false), 0) << output_;
   ASSERT_EQ(summary_["submitted"].size(), 4u) << output_;  // boundary, sim, surface, cleanup
   const json status = WaitForFarm("real.toml", root_ / "farm", false);
@@ -316,7 +316,7 @@ TEST_F(Farm, BakeMatchesALocalBakeByteForByte) {
   ASSERT_EQ(RunBake("real.toml", root_ / "farm", farm + " --farm slurm", false), 0) << output_;
   EXPECT_TRUE(summary_["submitted"].empty()) << output_;
   EXPECT_EQ(summary_["stale_jobs"], 0) << output_;
-  ASSERT_EQ(RunBake("real.toml", root_ / "farm", "cleanup", false), 0) << output_;
+  ASSERT_EQ(RunBake("real.toml", root_ / "farm", "clean", false), 0) << output_;
   EXPECT_EQ(TotalRan(), 0) << output_;
 }
 
@@ -324,12 +324,12 @@ TEST_F(Farm, FailedFrameIsReportedWithItsLogAndResubmittedAlone) {
   if (!ClusterUp()) GTEST_SKIP() << cluster_problem_;
   // A submission the scheduler refuses stops with its message and leaves nothing submitted.
   std::ofstream(root_ / "bad_partition.toml") << "[farm]\npartition = \"no_such_partition\"\n";
-  EXPECT_EQ(RunBake("fake.toml", root_ / "out", "cleanup --farm slurm --farm-config " + (root_ / "bad_partition.toml").string(), true), 9)
+  EXPECT_EQ(RunBake("fake.toml", root_ / "out", "clean --farm slurm --farm-config " + (root_ / "bad_partition.toml").string(), true), 9)
       << output_;
   EXPECT_NE(output_.find("sbatch refused the boundary job: sbatch: error: invalid partition"), std::string::npos) << output_;
   EXPECT_FALSE(fs::exists(root_ / "out/cache/.rime-bake/farm-jobs.json"));
 
-  const std::string farm = "cleanup --farm-config " + (root_ / "site1.toml").string();
+  const std::string farm = "clean --farm-config " + (root_ / "site1.toml").string();
   setenv("FAKE_FAIL", "surface:2", 1);  // exported to the tasks with the submitter's environment
   ASSERT_EQ(RunBake("fake.toml", root_ / "out", farm + " --farm slurm", true), 0) << output_;
   unsetenv("FAKE_FAIL");
@@ -345,7 +345,7 @@ TEST_F(Farm, FailedFrameIsReportedWithItsLogAndResubmittedAlone) {
   EXPECT_NE(ReadFile(log).find("no particles in frame (fake)"), std::string::npos);
   EXPECT_NE(status_text.find("surface.0002 failed"), std::string::npos) << status_text;
   EXPECT_NE(status_text.find(log.string()), std::string::npos) << status_text;
-  const json* cleanup = StatusOf(status, "cleanup.0002");
+  const json* cleanup = StatusOf(status, "clean.0002");
   ASSERT_NE(cleanup, nullptr) << status_text;
   EXPECT_EQ((*cleanup)["state"], "missing");  // its dependency failed, so Slurm never ran it
   EXPECT_EQ(Count(status, "done"), 2 + 2 * (kFakeLastFrame + 1) - 2) << status_text;
@@ -362,7 +362,7 @@ TEST_F(Farm, FailedFrameIsReportedWithItsLogAndResubmittedAlone) {
   EXPECT_NE(runs[1].find("ice.0002.obj"), std::string::npos);
 
   fs::remove(root_ / "invocations.log");
-  ASSERT_EQ(RunBake("fake.toml", root_ / "out", "cleanup", true), 0) << output_;
+  ASSERT_EQ(RunBake("fake.toml", root_ / "out", "clean", true), 0) << output_;
   EXPECT_EQ(TotalRan(), 0) << output_;
   EXPECT_TRUE(Invocations().empty());
 }
@@ -371,7 +371,7 @@ TEST_F(Farm, FailedFrameIsReportedWithItsLogAndResubmittedAlone) {
 // movie job after the whole array (fake Blender and ffmpeg).
 TEST_F(Farm, PreviewFramesAndMovieRunOnTheFarm) {
   if (!ClusterUp()) GTEST_SKIP() << cluster_problem_;
-  bake::testing::WriteFakePreviewTools(root_ / "preview_tools");
+  test::WriteFakePreviewTools(root_ / "preview_tools");
   const std::string path = std::getenv("PATH");
   setenv("PATH", ((root_ / "preview_tools").string() + ":" + path).c_str(), 1);
   const int code = RunBake("fake.toml", root_ / "out", "all --farm slurm --farm-config " + (root_ / "site.toml").string(), true);
@@ -380,7 +380,7 @@ TEST_F(Farm, PreviewFramesAndMovieRunOnTheFarm) {
   const json status = WaitForFarm("fake.toml", root_ / "out", true);  // the same Blender, so the same keys
   setenv("PATH", path.c_str(), 1);
   ASSERT_EQ(code, 0) << output_;
-  EXPECT_EQ(groups, (std::vector<std::string>{"boundary", "sim", "surface", "cleanup", "preview", "preview.movie"}));
+  EXPECT_EQ(groups, (std::vector<std::string>{"boundary", "sim", "surface", "clean", "preview", "preview.movie"}));
   EXPECT_EQ(status["stages"]["preview"]["done"], kFakeLastFrame + 2) << output_;  // every frame and the movie
   EXPECT_EQ(Count(status, "failed") + Count(status, "missing"), 0) << output_;
   for (int f = 0; f <= kFakeLastFrame; ++f) EXPECT_TRUE(fs::exists(root_ / fmt::format("out/preview/frame.{:04}.png", f))) << f;
@@ -389,7 +389,7 @@ TEST_F(Farm, PreviewFramesAndMovieRunOnTheFarm) {
 
 TEST_F(Farm, CancelLeavesNoJobAndNothingThatLooksFinished) {
   if (!ClusterUp()) GTEST_SKIP() << cluster_problem_;
-  const std::string farm = "cleanup --farm-config " + (root_ / "site.toml").string();
+  const std::string farm = "clean --farm-config " + (root_ / "site.toml").string();
   setenv("FAKE_SIM_SLEEP", "2", 1);  // the simulation takes about 8 s
   ASSERT_EQ(RunBake("fake.toml", root_ / "out", farm + " --farm slurm", true), 0) << output_;
   unsetenv("FAKE_SIM_SLEEP");
@@ -401,12 +401,12 @@ TEST_F(Farm, CancelLeavesNoJobAndNothingThatLooksFinished) {
   const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
   while (!fs::exists(root_ / "out/cache/sim/particles.0001.h5part") && std::chrono::steady_clock::now() < deadline)
     std::this_thread::sleep_for(std::chrono::milliseconds(100));
-  ASSERT_TRUE(fs::exists(root_ / "out/cache/sim/particles.0001.h5part")) << testing::LocalSlurm::Capture("squeue 2>&1");
-  EXPECT_EQ(RunBake("fake.toml", root_ / "out", "cleanup", true), 5) << output_;  // a local bake refuses meanwhile
+  ASSERT_TRUE(fs::exists(root_ / "out/cache/sim/particles.0001.h5part")) << test::LocalSlurm::Capture("squeue 2>&1");
+  EXPECT_EQ(RunBake("fake.toml", root_ / "out", "clean", true), 5) << output_;  // a local bake refuses meanwhile
   EXPECT_NE(output_.find("--farm cancel"), std::string::npos) << output_;
   ASSERT_EQ(RunBake("fake.toml", root_ / "out", farm + " --farm cancel", true), 0) << output_;
   EXPECT_FALSE(summary_["cancelled"].empty()) << output_;
-  const std::string queue = testing::LocalSlurm::Capture("squeue --noheader --format=%i 2>&1");
+  const std::string queue = test::LocalSlurm::Capture("squeue --noheader --format=%i 2>&1");
   for (const auto& id : ours) EXPECT_EQ(queue.find(id), std::string::npos) << "job " << id << " is still in the queue:\n" << queue;
 
   // Nothing the cancelled tasks left may pass as finished: the status shows nothing done after the
@@ -417,10 +417,10 @@ TEST_F(Farm, CancelLeavesNoJobAndNothingThatLooksFinished) {
   ASSERT_NE(sim, nullptr) << output_;
   EXPECT_EQ((*sim)["state"], "failed") << output_;  // interrupted: its incomplete marker remains
   EXPECT_LT(status["stages"]["surface"]["done"], kFakeLastFrame + 1) << output_;
-  ASSERT_EQ(RunBake("fake.toml", root_ / "out", "cleanup", true), 0) << output_;
+  ASSERT_EQ(RunBake("fake.toml", root_ / "out", "clean", true), 0) << output_;
   EXPECT_EQ(summary_["stages"]["sim"]["ran"], 1) << output_;
   EXPECT_NE(ReadFile(root_ / "out/cache/logs/sim.log").find("--resume"), std::string::npos) << "the cancelled simulation continues";
-  ASSERT_EQ(RunBake("fake.toml", root_ / "reference", "cleanup", true), 0) << output_;
+  ASSERT_EQ(RunBake("fake.toml", root_ / "reference", "clean", true), 0) << output_;
   EXPECT_TRUE(Outputs(root_ / "out") == Outputs(root_ / "reference"));
 }
 

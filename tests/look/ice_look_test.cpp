@@ -6,7 +6,7 @@
 #include <random>
 
 #include "rime/io/scene_surface.h"
-#include "rime/meshfix/ice_metrics.h"
+#include "rime/clean/ice_metrics.h"
 #include "rime/surface/reconstruct.h"
 
 namespace rime {
@@ -42,7 +42,7 @@ Glaze GlazeOnASphere() {
   return g;
 }
 
-meshfix::IceMetrics Measure(const Glaze& g, const surface::Settings& settings) {
+clean::IceMetrics Measure(const Glaze& g, const surface::Settings& settings) {
   surface::ParticleSet set;
   set.positions = g.ice;
   set.spacing = kSpacing;
@@ -59,7 +59,7 @@ meshfix::IceMetrics Measure(const Glaze& g, const surface::Settings& settings) {
   frame.Set("phase", phase);
   frame.Set("water_film", film);
   frame.Set("object_id", std::vector<std::uint32_t>(x.size(), 0));
-  return meshfix::MeasureIce(result.mesh, frame, {0, 0, -9.81}, {}, {});
+  return clean::MeasureIce(result.mesh, frame, {0, 0, -9.81}, {}, {});
 }
 
 TEST(IceLook, FilteredGlazeOnASphereIsOneSmoothCoat) {
@@ -69,7 +69,7 @@ TEST(IceLook, FilteredGlazeOnASphereIsOneSmoothCoat) {
   const io::SurfaceSettings defaults;  // the scene defaults rime-surface and rime-bake use
   filtered.close_radius = defaults.close;
   filtered.smooth_iterations = defaults.smooth;
-  const meshfix::IceMetrics before = Measure(glaze, raw), after = Measure(glaze, filtered);
+  const clean::IceMetrics before = Measure(glaze, raw), after = Measure(glaze, filtered);
   std::printf("raw: %zu pieces, noise %.3f d_p, sharp %.1f %%, %lld handles; filtered: %zu pieces, noise %.3f d_p, sharp %.1f %%, %lld handles\n",
               before.components, before.noise_rms, 100 * before.sharp_area_fraction, (long long)before.handles, after.components,
               after.noise_rms, 100 * after.sharp_area_fraction, (long long)after.handles);

@@ -18,8 +18,8 @@
 
 #include "rime/exec/device.h"
 #include "rime/sph/simulation.h"
-#include "validation_common.h"
-#include "../../libs/sph/tests/test_scenes.h"
+#include "rime/test/validation.h"
+#include "rime/test/sph_scenes.h"
 
 namespace rime::validation {
 namespace {

@@ -54,7 +54,7 @@
 
 #include "rime/exec/device.h"
 #include "rime/sph/simulation.h"
-#include "validation_common.h"
+#include "rime/test/validation.h"
 
 namespace rime::validation {
 namespace {
@@ -258,11 +258,7 @@ Result Oscillate(double radius_in_dp, double epsilon, const Config& cfg, bool tr
   return r;
 }
 
-double Median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  const std::size_t n = v.size();
-  return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
-}
+using test::Median;
 
 int Run(const Options& o, const Config& cfg) {
   std::vector<double> radii = o.full ? std::vector<double>{4, 5, 6, 8, 10, 12} : std::vector<double>{4, 6, 8};

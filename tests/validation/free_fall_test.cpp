@@ -5,7 +5,7 @@
 
 #include "rime/exec/device.h"
 #include "rime/sph/simulation.h"
-#include "../../libs/sph/tests/test_scenes.h"
+#include "rime/test/sph_scenes.h"
 
 namespace rime {
 namespace {

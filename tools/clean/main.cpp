@@ -1,5 +1,5 @@
 // rime-clean: production cleanup of rime-surface meshes with CGAL, one frame at a time.
-// Thin: parse options, find the frames, run meshfix::Clean on each (frames in parallel with -j),
+// Thin: parse options, find the frames, run clean::Clean on each (frames in parallel with -j),
 // write meshes, reports and a summary.
 #include <tbb/parallel_for.h>
 
@@ -24,7 +24,7 @@
 #include "rime/io/mesh.h"
 #include "rime/io/particles.h"
 #include "rime/io/scene.h"
-#include "rime/meshfix/clean.h"
+#include "rime/clean/clean.h"
 #include "override_flags.h"
 #include "tool.h"
 
@@ -95,7 +95,7 @@ double CountTriangles(const fs::path& path) {
 // process's base (docs/reliability.md); 300 B leaves room for the repair and remesh paths.
 double CleanBytes(double triangles) { return triangles * 300; }
 
-/// Adds the file to an error raised without one (meshfix does not know file names).
+/// Adds the file to an error raised without one (libs/clean does not know file names).
 [[noreturn]] void Rethrow(const Error& e, const fs::path& file) {
   throw Error(e.code(), e.message(), e.where().empty() ? file.string() : e.where());
 }
@@ -107,7 +107,7 @@ int main(int argc, char** argv) {
       "Cleans rime-surface meshes with CGAL 5.5, frame by frame: repairs and orients the polygon soup, removes degenerate\n"
       "faces and small components (ice specks), fills small holes, optionally remeshes, smooths, decimates, and reports\n"
       "self-intersections. Per-vertex velocities (PLY vx vy vz) are carried to the output from the nearest input point.\n"
-      "Lengths in m, areas in m^2, volumes in m^3. Defaults come from [cleanup] of --scene, else the built-in ones shown."};
+      "Lengths in m, areas in m^2, volumes in m^3. Defaults come from [clean] of --scene, else the built-in ones shown."};
   tool::CommonOptions common;
   tool::Setup(app, "rime-clean", common, tool::kThreads | tool::kFrames | tool::kJsonSummary | tool::kMemoryBudget | tool::kSandbox);
   app.get_option("-j")->description("Frames cleaned in parallel, and CPU threads in all (default: all cores)");
@@ -123,7 +123,7 @@ int main(int argc, char** argv) {
   app.add_option("--format", format,
                  "Folder output: obj, ply or both [both: OBJ for every DCC, PLY with per-vertex velocity for motion blur]")
       ->check(CLI::IsMember({"obj", "ply", "both"}));
-  app.add_option("--scene", scene_file, "Scene file whose [cleanup] section gives the defaults (options below override it)");
+  app.add_option("--scene", scene_file, "Scene file whose [clean] section gives the defaults (options below override it)");
   app.add_option("--report", report_file, "Write every frame's quality report to this JSON file");
 
   auto* g = app.add_option_group("Operations (in this order)");
@@ -217,9 +217,9 @@ int main(int argc, char** argv) {
         const auto t0 = std::chrono::steady_clock::now();
         const io::TriMesh mesh = io::ReadMesh(f.input);
         const double read_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-        meshfix::CleanResult result;
+        clean::CleanResult result;
         try {
-          result = meshfix::Clean(mesh, settings);
+          result = clean::Clean(mesh, settings);
         } catch (const Error& e) {
           Rethrow(e, f.input);
         }
@@ -230,7 +230,7 @@ int main(int argc, char** argv) {
         warnings += result.report.warnings.size();
         faces_in += result.report.before.faces;
         faces_out += result.report.after.faces;
-        nlohmann::json j = meshfix::ToJson(result.report);
+        nlohmann::json j = clean::ToJson(result.report);
         j["input"] = f.input.string();
         j["outputs"] = nlohmann::json::array();
         for (const fs::path& o : f.outputs) j["outputs"].push_back(o.string());
@@ -239,7 +239,7 @@ int main(int argc, char** argv) {
         j["write_seconds"] = write_s;
         if (!f.report.empty()) WriteFileAtomically(f.report, j.dump(2) + "\n");
         reports[i] = std::move(j);
-        lines[i] = f.input.filename().string() + ": " + meshfix::SummaryLine(result.report);
+        lines[i] = f.input.filename().string() + ": " + clean::SummaryLine(result.report);
         log::Debug("{}", lines[i]);
         progress.Advance();
       } catch (const Error& e) {

@@ -1,6 +1,6 @@
 // rime-inspect: measures what a bake's ice looks like, frame by frame (docs/ice-metrics.md):
 // specks, particle-scale noise, topology, glaze coverage and thickness, icicles.
-// Thin: find a bake's particle frames and cleaned meshes, run meshfix::MeasureIce, print a table, write JSON.
+// Thin: find a bake's particle frames and cleaned meshes, run clean::MeasureIce, print a table, write JSON.
 #include <algorithm>
 #include <filesystem>
 #include <regex>
@@ -13,7 +13,7 @@
 #include "rime/io/mesh.h"
 #include "rime/io/particles.h"
 #include "rime/io/scene.h"
-#include "rime/meshfix/ice_metrics.h"
+#include "rime/clean/ice_metrics.h"
 #include "tool.h"
 
 namespace fs = std::filesystem;
@@ -21,7 +21,7 @@ using namespace rime;
 
 namespace {
 
-nlohmann::json ToJson(std::int64_t frame, double time, const meshfix::IceMetrics& m) {
+nlohmann::json ToJson(std::int64_t frame, double time, const clean::IceMetrics& m) {
   nlohmann::json icicles = nlohmann::json::array();
   for (const auto& i : m.icicles)
     icicles.push_back({{"length_dp", i.length},
@@ -71,7 +71,7 @@ int main(int argc, char** argv) {
   tool::Setup(app, "rime-inspect", common, tool::kFrames | tool::kJsonSummary);
   std::string scene_file, output, json_file, mesh_stem = "ice_clean";
   bool raw = false;
-  meshfix::IceMetricsSettings settings;
+  clean::IceMetricsSettings settings;
   app.add_option("SCENE", scene_file, "Scene file of the bake")->required();
   app.add_option("-o,--output", output, "Bake output folder (default: out/<scene name>, as rime-bake)");
   app.add_option("--json", json_file, "Where to write the per-frame metrics (default: <output>/inspect.json)");
@@ -120,7 +120,7 @@ int main(int argc, char** argv) {
         }
       }
       const io::TriMesh mesh = fs::exists(mesh_file) ? io::ReadMesh(mesh_file) : io::TriMesh{};
-      const meshfix::IceMetrics m = meshfix::MeasureIce(mesh, frame, scene.solver.gravity, objects, settings);
+      const clean::IceMetrics m = clean::MeasureIce(mesh, frame, scene.solver.gravity, objects, settings);
       fmt::print("{:>5} {:>6} {:>6} {:>6} {:>6} {:>5} {:>7.2f} {:>6.3f} {:>6.3f} {:>6.2f} {:>4.2f}±{:<4.2f} {:>7} {:>7} {:>6.1f} {:>6.1f}\n",
                  f, m.water, m.ice, m.components, m.specks, m.tiny_pieces, m.handles_per_1000_dp2, m.noise_rms,
                  m.sharp_area_fraction, m.glaze_coverage, m.thickness_mean, m.thickness_spread, m.icicles.size(), m.hanging_icicles,

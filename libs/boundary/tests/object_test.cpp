@@ -15,6 +15,7 @@
 #include "rime/boundary/shapes.h"
 #include "rime/core/error.h"
 #include "rime/io/mesh.h"
+#include "rime/test/files.h"
 #include "test_helpers.h"
 
 namespace rime::boundary {
@@ -29,7 +30,6 @@ fs::path TempDir(const std::string& name) {
   return dir;
 }
 
-void WriteText(const fs::path& path, const std::string& text) { std::ofstream(path, std::ios::binary) << text; }
 
 io::SolidObject MeshObject(const fs::path& file) {
   io::SolidObject o;
@@ -87,7 +87,7 @@ TEST(BoundaryObject, ProceduralBoxWritesAReadableBoundaryFile) {
 TEST(BoundaryObject, MeshFileFormatsThroughAssimp) {
   const fs::path dir = TempDir("formats");
   // One cube written as OBJ (quads), ASCII STL (triangle soup) and PLY; all give the same particles.
-  WriteText(dir / "cube.obj",
+  test::WriteFile(dir / "cube.obj",
             "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nv 0 0 1\nv 1 0 1\nv 0 1 1\nv 1 1 1\n"
             "f 1 3 4 2\nf 5 6 8 7\nf 1 2 6 5\nf 3 7 8 4\nf 1 5 7 3\nf 2 4 8 6\n");
   io::WriteMesh(dir / "cube.ply", test_support::UnitCube());
@@ -101,7 +101,7 @@ TEST(BoundaryObject, MeshFileFormatsThroughAssimp) {
     }
     stl += "  endloop\n endfacet\n";
   }
-  WriteText(dir / "cube.stl", stl + "endsolid cube\n");
+  test::WriteFile(dir / "cube.stl", stl + "endsolid cube\n");
   BoundarySettings settings;
   settings.particle_spacing = 0.2;  // d_b = 0.1
   std::size_t expected = 0;
@@ -131,7 +131,7 @@ TEST(BoundaryObject, MultiMeshFilesMergeUnlessAskedOtherwise) {
   const fs::path dir = TempDir("parts");
   // Two named objects with the same triangle, 1 mm apart: merged, the copy is removed as a
   // near-duplicate; kept apart, both layers stay.
-  WriteText(dir / "two.obj", "o a\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\no b\nv 0 0 0.001\nv 1 0 0.001\nv 0 1 0.001\nf 4 5 6\n");
+  test::WriteFile(dir / "two.obj", "o a\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\no b\nv 0 0 0.001\nv 1 0 0.001\nv 0 1 0.001\nf 4 5 6\n");
   io::SolidObject object = MeshObject(dir / "two.obj");
   BoundarySettings settings;
   settings.particle_spacing = 0.1;
@@ -163,17 +163,17 @@ void ExpectBadFile(const fs::path& file, const std::string& fragment, double spa
 TEST(BoundaryObject, BadInputFiles) {
   const fs::path dir = TempDir("bad");
   const std::string cube = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n";
-  WriteText(dir / "good.obj", cube);
+  test::WriteFile(dir / "good.obj", cube);
   ExpectBadFile(dir / "missing.obj", "not found");
-  WriteText(dir / "points.xyz", "1 2 3\n");
+  test::WriteFile(dir / "points.xyz", "1 2 3\n");
   ExpectBadFile(dir / "points.xyz", "unsupported mesh format");
-  WriteText(dir / "garbage.fbx", "this is not an fbx file");
+  test::WriteFile(dir / "garbage.fbx", "this is not an fbx file");
   ExpectBadFile(dir / "garbage.fbx", "cannot read");
-  WriteText(dir / "vertices.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\n");
+  test::WriteFile(dir / "vertices.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\n");
   ExpectBadFile(dir / "vertices.obj", "no triangles");
-  WriteText(dir / "nan.obj", "v 0 0 0\nv nan 0 0\nv 0 1 0\nf 1 2 3\n");
+  test::WriteFile(dir / "nan.obj", "v 0 0 0\nv nan 0 0\nv 0 1 0\nf 1 2 3\n");
   ExpectBadFile(dir / "nan.obj", "NaN or infinite");
-  WriteText(dir / "inf.obj", "v 0 0 0\nv 1 0 0\nv 0 inf 0\nf 1 2 3\n");
+  test::WriteFile(dir / "inf.obj", "v 0 0 0\nv 1 0 0\nv 0 inf 0\nf 1 2 3\n");
   ExpectBadFile(dir / "inf.obj", "NaN or infinite");
   ExpectBadFile(dir / "good.obj", "spacing", 0);
   ExpectBadFile(dir / "good.obj", "spacing", -0.1);

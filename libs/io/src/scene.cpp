@@ -135,6 +135,11 @@ Scene ParseScene(const std::string& text, const fs::path& file) {
   scene.file = file;
   scene.hash = HexHash(Hash64(text));
   TomlReader top(root, name, "");
+  // Each stage has one name (library, tool, section, bake stage); a scene written for the former
+  // section names is told the current one instead of "unknown key".
+  for (const auto& [former, current] : {std::pair{"simulation", "sim"}, {"cleanup", "clean"}})
+    if (top.Has(former))
+      throw InputError(fmt::format("[{}] is now called [{}]: rename the section", former, current), top.Where(former) + ": " + former);
 
   {
     TomlReader t = top.Table("scene");
@@ -154,7 +159,7 @@ Scene ParseScene(const std::string& text, const fs::path& file) {
     t.RejectUnknownKeys();
   }
   {
-    TomlReader t = top.Table("simulation");
+    TomlReader t = top.Table("sim");
     SolverSettings& s = scene.solver;
     const auto modules = t.Has("modules") ? t.StringList("modules", KnownModules()) : std::vector<std::string>{"gravity"};
     scene.modules = {modules.begin(), modules.end()};
@@ -166,7 +171,7 @@ Scene ParseScene(const std::string& text, const fs::path& file) {
   // Module parameter tables: each named after its module.
   const auto module_table = [&](const std::string& module) {
     if (top.Has(module) && !scene.Enabled(module))
-      throw InputError(fmt::format("[{}] is set but the module is not enabled (add \"{}\" to simulation.modules)", module, module),
+      throw InputError(fmt::format("[{}] is set but the module is not enabled (add \"{}\" to sim.modules)", module, module),
                        top.Where(module) + ": " + module);
     return top.Table(module);
   };
@@ -221,7 +226,7 @@ Scene ParseScene(const std::string& text, const fs::path& file) {
     t.RejectUnknownKeys();
   }
   {
-    TomlReader t = top.Table("cleanup");
+    TomlReader t = top.Table("clean");
     ParseCleanupSettings(t, scene.cleanup);
     t.RejectUnknownKeys();
   }

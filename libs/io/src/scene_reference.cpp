@@ -78,7 +78,7 @@ std::vector<ReferenceTable> SceneReferenceTables() {
   return {
       {scenes, "scene", MarkdownTable<SceneInfo>()},
       {scenes, "water", MarkdownTable<FluidSettings>()},
-      {scenes, "simulation", MarkdownTable<SolverSettings>()},
+      {scenes, "sim", MarkdownTable<SolverSettings>()},
       {scenes, "viscosity", MarkdownTable<ViscositySettings>()},
       {scenes, "surface_tension", MarkdownTable<SurfaceTensionSettings>()},
       {scenes, "air_pressure", MarkdownTable<AirPressureSettings>()},
@@ -89,7 +89,7 @@ std::vector<ReferenceTable> SceneReferenceTables() {
       {scenes, "solid.keyframe", MarkdownTable<Keyframe>()},
       {scenes, "domain", MarkdownTable<Domain>()},
       {scenes, "surface", MarkdownTable<SurfaceSettings>()},
-      {scenes, "cleanup", MarkdownTable<CleanupSettings>()},
+      {scenes, "clean", MarkdownTable<CleanupSettings>()},
       {scenes, "bake", MarkdownTable<BakeSettings>()},
       {tools, "flags: boundary", header + FlagRows<FluidSettings>() + FlagRows<SolidObject>()},
       {tools, "flags: sim", header + FlagRows<SceneInfo>()},

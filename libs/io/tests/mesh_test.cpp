@@ -8,6 +8,7 @@
 
 #include "rime/core/error.h"
 #include "rime/io/mesh.h"
+#include "rime/test/files.h"
 
 namespace rime::io {
 namespace {
@@ -19,9 +20,6 @@ fs::path TempDir() {
   return dir;
 }
 
-void WriteText(const fs::path& path, const std::string& text) {
-  std::ofstream(path, std::ios::binary) << text;
-}
 
 /// Runs ReadMesh and returns the error text (fails the test if it succeeds) and the exit code.
 std::pair<std::string, ExitCode> ReadError(const fs::path& path) {
@@ -97,7 +95,7 @@ TEST(Mesh, EmptyMeshGivesValidEmptyFile) {
 
 TEST(Mesh, ObjPolygonsCornerFormsAndNegativeIndices) {
   const fs::path path = TempDir() / "quad.obj";
-  WriteText(path,
+  test::WriteFile(path,
             "# a quad and a pentagon\n"
             "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv +2 0.5 -1e-1\n"
             "vt 0 0\nvn 0 0 1\nvn 0 0 -1\n"
@@ -119,7 +117,7 @@ TEST(Mesh, ObjPolygonsCornerFormsAndNegativeIndices) {
 
 TEST(Mesh, AsciiPlyWithQuadsAndExtraProperties) {
   const fs::path path = TempDir() / "ascii.ply";
-  WriteText(path,
+  test::WriteFile(path,
             "ply\nformat ascii 1.0\ncomment made by hand\n"
             "element vertex 4\nproperty double x\nproperty double y\nproperty double z\n"
             "property uchar red\nproperty float vx\nproperty float vy\nproperty float vz\n"
@@ -146,7 +144,7 @@ TEST(Mesh, MissingFileIsInputError) {
 
 TEST(Mesh, NanCoordinateNamesFileAndLine) {
   const fs::path path = TempDir() / "nan.obj";
-  WriteText(path, "v 0 0 0\nv 1 0 0\nv nan 1 0\nf 1 2 3\n");
+  test::WriteFile(path, "v 0 0 0\nv 1 0 0\nv nan 1 0\nf 1 2 3\n");
   const auto [what, code] = ReadError(path);
   EXPECT_EQ(code, ExitCode::kBadInput);
   EXPECT_NE(what.find("nan.obj:3"), std::string::npos) << what;
@@ -165,14 +163,14 @@ TEST(Mesh, NanInBinaryPlyNamesVertex) {
 
 TEST(Mesh, IndexOutOfRange) {
   const fs::path obj = TempDir() / "range.obj";
-  WriteText(obj, "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 2 4\n");
+  test::WriteFile(obj, "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 2 4\n");
   auto [what, code] = ReadError(obj);
   EXPECT_EQ(code, ExitCode::kBadInput);
   EXPECT_NE(what.find("range.obj:5"), std::string::npos) << what;
   EXPECT_NE(what.find("out of range"), std::string::npos) << what;
 
   const fs::path ply = TempDir() / "range.ply";
-  WriteText(ply,
+  test::WriteFile(ply,
             "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
             "element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 3\n");
   std::tie(what, code) = ReadError(ply);
@@ -196,13 +194,13 @@ TEST(Mesh, TruncatedBinaryPly) {
 
 TEST(Mesh, GarbageAndUnsupported) {
   const fs::path junk = TempDir() / "junk.ply";
-  WriteText(junk, "this is not a ply file\n");
+  test::WriteFile(junk, "this is not a ply file\n");
   EXPECT_EQ(ReadError(junk).second, ExitCode::kBadInput);
   const fs::path stl = TempDir() / "a.stl";
-  WriteText(stl, "solid x\n");
+  test::WriteFile(stl, "solid x\n");
   EXPECT_NE(ReadError(stl).first.find("unsupported"), std::string::npos);
   const fs::path bad_face = TempDir() / "bad_face.obj";
-  WriteText(bad_face, "v 0 0 0\nv 1 0 0\nf 1 2\n");
+  test::WriteFile(bad_face, "v 0 0 0\nv 1 0 0\nf 1 2\n");
   EXPECT_NE(ReadError(bad_face).first.find("bad_face.obj:3"), std::string::npos);
 }
 

@@ -86,7 +86,7 @@ TEST(SceneLimits, NanAndInfinityAreRefusedWhereverANumberIsRead) {
       {"[scene]\nfps = nan\n", "hostile.toml:2: scene.fps"},
       {"[scene]\nend_time = inf\n", "hostile.toml:2: scene.end_time"},
       {"[water]\nspacing = -nan\n", "hostile.toml:2: water.spacing"},
-      {"[simulation]\ngravity = [0, 0, -inf]\n", "hostile.toml:2: simulation.gravity"},
+      {"[sim]\ngravity = [0, 0, -inf]\n", "hostile.toml:2: sim.gravity"},
       {"[[water_block]]\nvelocity = [nan, 0, 0]\n", "hostile.toml:2: water_block[0].velocity"},
       {"[[water_block]]\nmin = [0, 0, nan]\n", "hostile.toml:2: water_block[0].min"},
       {"[[emitter]]\nspeed = +inf\n", "hostile.toml:2: emitter[0].speed"},
@@ -94,7 +94,7 @@ TEST(SceneLimits, NanAndInfinityAreRefusedWhereverANumberIsRead) {
       {"[[solid]]\ntranslate = [inf, 0, 0]\n", "hostile.toml:2: solid[0].translate"},
       {"[[solid]]\n[[solid.keyframe]]\ntime = nan\n", "hostile.toml:3: solid[0].keyframe[0].time"},
       {"[domain]\nmin = [nan, 0, 0]\nmax = [1, 1, 1]\n", "hostile.toml:2: domain.min"},
-      {"[simulation]\nmodules = [\"freezing\"]\n[freezing]\nk_n = nan\n", "hostile.toml:4: freezing.k_n"},
+      {"[sim]\nmodules = [\"freezing\"]\n[freezing]\nk_n = nan\n", "hostile.toml:4: freezing.k_n"},
       {"[surface]\nlambda = nan\n", "hostile.toml:2: surface.lambda"},
   };
   for (const Case& c : cases) EXPECT_TRUE(Has(Refusal(c.text), c.field)) << c.text;

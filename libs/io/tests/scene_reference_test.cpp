@@ -63,7 +63,7 @@ void ExpectRangesEnforced(const std::string& section, const std::string& preambl
 
 TEST(SceneReference, LoaderEnforcesEveryDeclaredLowerBound) {
   const std::string all_modules =
-      "[simulation]\nmodules = [\"gravity\", \"viscosity\", \"surface_tension\", \"air_pressure\", \"freezing\"]\n";
+      "[sim]\nmodules = [\"gravity\", \"viscosity\", \"surface_tension\", \"air_pressure\", \"freezing\"]\n";
   ExpectRangesEnforced<SceneInfo>("scene", "");
   ExpectRangesEnforced<FluidSettings>("water", "");
   ExpectRangesEnforced<ViscositySettings>("viscosity", all_modules);
@@ -71,12 +71,12 @@ TEST(SceneReference, LoaderEnforcesEveryDeclaredLowerBound) {
   ExpectRangesEnforced<AirPressureSettings>("air_pressure", all_modules);
   ExpectRangesEnforced<FreezingSettings>("freezing", all_modules);
   ExpectRangesEnforced<SurfaceSettings>("surface", "");
-  ExpectRangesEnforced<CleanupSettings>("cleanup", "");
+  ExpectRangesEnforced<CleanupSettings>("clean", "");
 }
 
 TEST(SceneReference, StringOptionsBecomeEnumsAndUnknownNamesAreRefused) {
-  const Scene s = ParseScene("[simulation]\nmodules = [\"gravity\", \"freezing\"]\ntime_step = \"fixed\"\n"
-                             "[freezing]\nfr_mode = \"map\"\nce_aggregation = \"sum\"\n[cleanup]\nsmooth = \"none\"\n",
+  const Scene s = ParseScene("[sim]\nmodules = [\"gravity\", \"freezing\"]\ntime_step = \"fixed\"\n"
+                             "[freezing]\nfr_mode = \"map\"\nce_aggregation = \"sum\"\n[clean]\nsmooth = \"none\"\n",
                              "enums.toml");
   EXPECT_EQ(s.solver.time_step, TimeStep::kFixed);
   EXPECT_EQ(s.freezing.fr_mode, FrMode::kMap);
@@ -84,7 +84,7 @@ TEST(SceneReference, StringOptionsBecomeEnumsAndUnknownNamesAreRefused) {
   EXPECT_EQ(s.cleanup.smooth, MeshSmoothing::kNone);
   EXPECT_EQ(EnumName(s.freezing.growth), "anisotropic");
   try {
-    ParseScene("[simulation]\nmodules = [\"gravity\", \"freezing\"]\n[freezing]\ngrowth = \"radial\"\n", "enums.toml");
+    ParseScene("[sim]\nmodules = [\"gravity\", \"freezing\"]\n[freezing]\ngrowth = \"radial\"\n", "enums.toml");
     ADD_FAILURE() << "accepted an unknown growth";
   } catch (const Error& e) {
     EXPECT_NE(std::string(e.what()).find("unknown value 'radial' (expected one of: anisotropic, isotropic)"), std::string::npos)
@@ -95,7 +95,7 @@ TEST(SceneReference, StringOptionsBecomeEnumsAndUnknownNamesAreRefused) {
 
 TEST(SceneReference, RemovedPcaOptionIsRefusedWithAReason) {
   try {
-    ParseScene("[simulation]\nmodules = [\"gravity\", \"freezing\"]\n[freezing]\npca = \"w2h\"\n", "pca.toml");
+    ParseScene("[sim]\nmodules = [\"gravity\", \"freezing\"]\n[freezing]\npca = \"w2h\"\n", "pca.toml");
     ADD_FAILURE() << "accepted freezing.pca";
   } catch (const Error& e) {
     EXPECT_NE(std::string(e.what()).find("removed"), std::string::npos) << e.what();

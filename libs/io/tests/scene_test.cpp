@@ -23,7 +23,7 @@ fps = 30
 end_time = 1.5
 [water]
 spacing = 0.01
-[simulation]
+[sim]
 modules = ["gravity", "viscosity"]
 omega = 0.6
 [viscosity]
@@ -60,10 +60,23 @@ velocity = [0, 0, -1]
 }
 
 TEST(Scene, RejectsUnknownModuleWithFileAndLine) {
-  const std::string e = ErrorOf("[simulation]\nmodules = [\"gravity\", \"vorticity\"]\n");
+  const std::string e = ErrorOf("[sim]\nmodules = [\"gravity\", \"vorticity\"]\n");
   EXPECT_NE(e.find("unknown name 'vorticity'"), std::string::npos) << e;
   EXPECT_NE(e.find("test.toml:2"), std::string::npos) << e;
-  EXPECT_NE(e.find("simulation.modules"), std::string::npos) << e;
+  EXPECT_NE(e.find("sim.modules"), std::string::npos) << e;
+}
+
+TEST(Scene, FormerSectionNamesAreRefusedNamingTheCurrentOne) {
+  for (const auto& [former, current] : {std::pair<std::string, std::string>{"simulation", "sim"}, {"cleanup", "clean"}}) {
+    try {
+      ParseScene("[scene]\nfps = 24\n[" + former + "]\n", "test.toml");
+      ADD_FAILURE() << "[" << former << "] accepted";
+    } catch (const Error& e) {
+      EXPECT_EQ(e.code(), ExitCode::kBadInput) << e.what();
+      EXPECT_NE(std::string(e.what()).find("[" + former + "] is now called [" + current + "]"), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find("test.toml:3"), std::string::npos) << e.what();
+    }
+  }
 }
 
 TEST(Scene, RejectsNegativeSpacingWithFileAndLine) {
@@ -88,7 +101,7 @@ TEST(Scene, OtherChecks) {
   EXPECT_NE(ErrorOf("[viscosity]\nbeta0 = 0.1\n").find("not enabled"), std::string::npos);
   EXPECT_NE(ErrorOf("[water]\nspacing = \"small\"\n").find("expected a number"), std::string::npos);
   EXPECT_NE(ErrorOf("[water]\nspacing = nan\n").find("out of range"), std::string::npos);
-  EXPECT_NE(ErrorOf("[simulation]\nomega = 0.5\nomega = 0.6\n").find("syntax"), std::string::npos);
+  EXPECT_NE(ErrorOf("[sim]\nomega = 0.5\nomega = 0.6\n").find("syntax"), std::string::npos);
   EXPECT_NE(ErrorOf("[[solid]]\nshape = \"mesh\"\n").find("needs a mesh"), std::string::npos);
   EXPECT_NE(ErrorOf("[[water_block]]\nmin = [0,0,0]\nmax = [1,1,-1]\n").find("max must exceed"), std::string::npos);
   EXPECT_NE(ErrorOf("[[solid]]\nname = \"a\"\n[[solid]]\nname = \"a\"\n").find("two solids"), std::string::npos);
@@ -98,7 +111,7 @@ TEST(Scene, QualityPresetsSetDefaultsAndExplicitValuesWin) {
   const Scene preview = ParseScene("[scene]\nquality = \"preview\"\n", "q.toml");
   EXPECT_EQ(preview.solver.eta, 0.01);
   EXPECT_EQ(preview.solver.cfl, 0.6);
-  const Scene reference = ParseScene("[scene]\nquality = \"reference\"\n[simulation]\neta = 0.0005\n", "q.toml");
+  const Scene reference = ParseScene("[scene]\nquality = \"reference\"\n[sim]\neta = 0.0005\n", "q.toml");
   EXPECT_EQ(reference.solver.eta, 0.0005) << "an explicit value overrides the preset";
   EXPECT_EQ(reference.solver.cfl, 0.2);
   EXPECT_EQ(reference.fluid.precision, Precision::kDouble);
@@ -117,7 +130,7 @@ TEST(Scene, Im2013MethodPresetSetsTheBaselineAndExplicitValuesWin) {
   EXPECT_EQ(im.freezing.growth, Growth::kIsotropic);
   EXPECT_EQ(im.surface_tension.model, SurfaceTensionModel::kAkinci2013);
   EXPECT_EQ(im.viscosity.wall_beta0, 0);
-  const Scene sticky = ParseScene("[scene]\nmethod = \"im2013\"\n[simulation]\nmodules = [\"gravity\", \"viscosity\"]\n[viscosity]\nwall_beta0 = 0.5\n",
+  const Scene sticky = ParseScene("[scene]\nmethod = \"im2013\"\n[sim]\nmodules = [\"gravity\", \"viscosity\"]\n[viscosity]\nwall_beta0 = 0.5\n",
                                   "m.toml");
   EXPECT_EQ(sticky.viscosity.wall_beta0, 0.5) << "an explicit value overrides the preset";
   EXPECT_THROW(ParseScene("[scene]\nmethod = \"im2014\"\n", "m.toml"), rime::Error);

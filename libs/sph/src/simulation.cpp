@@ -158,11 +158,11 @@ void Simulation<T>::Initialize() {
   {
     const auto [limit, parameter] = ExplicitStepLimit(scene_, modules_);
     if (scene_.solver.time_step == io::TimeStep::kCfl && limit < scene_.solver.dt_min)
-      throw InputError(fmt::format("{} needs time steps below {:.3g} s for stability, but simulation.dt_min is {:.3g} s: lower {} or dt_min",
+      throw InputError(fmt::format("{} needs time steps below {:.3g} s for stability, but sim.dt_min is {:.3g} s: lower {} or dt_min",
                                    parameter, limit, scene_.solver.dt_min, parameter),
                        SceneField(scene_, parameter));
     if (scene_.solver.time_step == io::TimeStep::kFixed && scene_.solver.dt > limit)
-      log::Warn("simulation.dt = {:.3g} s exceeds the stability limit {:.3g} s set by {}: expect the run to diverge", scene_.solver.dt, limit,
+      log::Warn("sim.dt = {:.3g} s exceeds the stability limit {:.3g} s set by {}: expect the run to diverge", scene_.solver.dt, limit,
                 parameter);
   }
   UpdateBoundaryMotion(0.0);
@@ -276,9 +276,9 @@ void Simulation<T>::CheckDivergence(const StepStats& stats) const {
   const std::string reason = bad_speed     ? "a particle velocity became NaN or infinite"
                              : bad_courant ? fmt::format("particles move {:.3g} spacings per step (above {}, where they tunnel through walls): the time step is too large",
                                                          courant, kMaxSpacingsPerStep)
-                                           : fmt::format("average density error {:.3g}% exceeds the limit {:.3g}% (simulation.divergence_density_error)",
+                                           : fmt::format("average density error {:.3g}% exceeds the limit {:.3g}% (sim.divergence_density_error)",
                                                      100 * stats.average_density_error, 100 * limit);
-  const char* advice = scene_.solver.time_step == io::TimeStep::kFixed ? "Reduce simulation.dt" : "Reduce simulation.cfl or dt_max";
+  const char* advice = scene_.solver.time_step == io::TimeStep::kFixed ? "Reduce sim.dt" : "Reduce sim.cfl or dt_max";
   throw Error(ExitCode::kDiverged, fmt::format("simulation diverged at step {} (t = {:.6g} s, dt = {:.3g} s): {}; {}. {}, or check the scene",
                                                step_count_, time_, stats.dt, reason, particle, advice));
 }

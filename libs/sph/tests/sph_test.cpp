@@ -11,7 +11,7 @@
 #include "rime/neighbors/grid.h"
 #include "rime/sph/kernels.h"
 #include "rime/sph/simulation.h"
-#include "test_scenes.h"
+#include "rime/test/sph_scenes.h"
 
 namespace rime::sph {
 namespace {

@@ -12,7 +12,7 @@
 #include "../src/state.h"
 #include "rime/exec/device.h"
 #include "rime/sph/simulation.h"
-#include "test_scenes.h"
+#include "rime/test/sph_scenes.h"
 
 namespace rime::sph {
 namespace {

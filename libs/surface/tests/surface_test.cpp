@@ -14,6 +14,7 @@
 #include <random>
 
 #include "rime/core/error.h"
+#include "rime/core/union_find.h"
 #include "rime/surface/reconstruct.h"
 #include "../src/grids.h"
 
@@ -76,22 +77,17 @@ MeshReport Analyze(const io::TriMesh& mesh) {
     if (count > 1) ++report.inconsistent_edges;
     if (!directed.count({edge.second, edge.first})) ++report.boundary_edges;
   }
-  std::vector<std::uint32_t> parent(mesh.positions.size());
-  std::iota(parent.begin(), parent.end(), 0u);
-  const auto find = [&](std::uint32_t a) {
-    while (parent[a] != a) a = parent[a] = parent[parent[a]];
-    return a;
-  };
+  UnionFind vertices(mesh.positions.size());
   for (const auto& t : mesh.triangles) {
-    parent[find(t[1])] = find(t[0]);
-    parent[find(t[2])] = find(t[0]);
+    vertices.Unite(t[0], t[1]);
+    vertices.Unite(t[0], t[2]);
     const Vec3d a(mesh.positions[t[0]]), b(mesh.positions[t[1]]), c(mesh.positions[t[2]]);
     report.signed_volume += Dot(a, Cross(b, c)) / 6;
   }
   std::vector<bool> used(mesh.positions.size(), false);
-  for (const auto& t : mesh.triangles) used[t[0]] = true;
-  for (std::uint32_t v = 0; v < parent.size(); ++v)
-    if (used[v] && find(v) == v) ++report.components;
+  for (const auto& t : mesh.triangles) used[t[0]] = used[t[1]] = used[t[2]] = true;
+  for (std::uint32_t v = 0; v < mesh.positions.size(); ++v)
+    if (used[v] && vertices.Find(v) == v) ++report.components;
   return report;
 }
 

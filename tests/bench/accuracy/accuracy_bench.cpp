@@ -34,8 +34,9 @@
 #include "rime/exec/device.h"
 #include "rime/io/particles.h"
 #include "rime/sph/simulation.h"
-#include "../../../libs/sph/tests/test_scenes.h"
-#include "../../validation/validation_common.h"
+#include "rime/test/sph_scenes.h"
+#include "rime/test/measure.h"
+#include "rime/test/validation.h"
 #if RIME_ACCURACY_SURFACE
 #include "rime/surface/frame_input.h"
 #include "rime/surface/reconstruct.h"
@@ -349,18 +350,7 @@ json RunChild(const Setting& s, double end_time, int threads, Job job = Job::kDa
   return r;
 }
 
-double Median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  return v.empty() ? 0 : v[v.size() / 2];
-}
-
-std::string LoadAverage() {
-  double l[3] = {0, 0, 0};
-  if (getloadavg(l, 3) != 3) return "?";
-  char b[64];
-  std::snprintf(b, sizeof b, "%.2f %.2f %.2f", l[0], l[1], l[2]);
-  return b;
-}
+using test::Median;
 
 std::vector<Setting> Settings(bool with_freezing) {
   std::vector<Setting> v;
@@ -466,7 +456,7 @@ int main(int argc, char** argv) {
   CLI::App app{"Rime speed/accuracy study (dam break over the solver knobs)"};
   int repeats = 3, threads = 0, freezing_repeats = 1;
   double end_time = 0.4;
-  std::string out_dir = "tests/bench/accuracy/results", only;
+  std::string out_dir = RIME_BENCH_OUTPUT_DIR, only;
   bool no_freezing = false, no_plots = false, no_hydrostatic = false, no_surface = false;
   app.add_option("--repeats", repeats, "Runs per setting (median time reported)");
   app.add_option("--end", end_time, "Simulated time, s (front sampled every 0.1 s)");
@@ -480,7 +470,7 @@ int main(int argc, char** argv) {
   app.add_flag("--no-surface", no_surface, "Skip the reconstruction voxel-size sweep on the freezing reference's ice");
   CLI11_PARSE(app, argc, argv);
   std::filesystem::create_directories(out_dir);
-  const std::string load_before = LoadAverage();
+  const std::string load_before = test::LoadAverages();
   const unsigned hw = std::thread::hardware_concurrency();
   const int used_threads = threads > 0 ? threads : int(hw);
 
@@ -588,7 +578,7 @@ int main(int argc, char** argv) {
   }
 
   std::filesystem::remove(snapshot);
-  const std::string load_after = LoadAverage();
+  const std::string load_after = test::LoadAverages();
   std::printf("\nRime speed/accuracy study: dam break a = %.2f m (height 2a), %.2f s simulated, %d CPU threads, median of %d runs; "
               "load average before %s, after %s\n",
               kA, end_time, used_threads, repeats, load_before.c_str(), load_after.c_str());
@@ -640,7 +630,8 @@ int main(int argc, char** argv) {
            << r["surface_error_p95_dp"] << "\n";
     }
   }
-  json doc = {{"study", "dam break speed/accuracy"}, {"column_width_m", kA}, {"end_time_s", end_time}, {"threads", used_threads},
+  json doc = {{"study", "dam break speed/accuracy"}, {"machine", test::MachineDescription()},
+              {"commit", test::SourceCommit(RIME_SOURCE_DIR)}, {"column_width_m", kA}, {"end_time_s", end_time}, {"threads", used_threads},
               {"repeats", repeats}, {"load_average_before", load_before}, {"load_average_after", load_after}, {"runs", out},
               {"voxel_sweep", surface_rows}};
   std::ofstream(out_dir + "/results.json") << doc.dump(2) << "\n";

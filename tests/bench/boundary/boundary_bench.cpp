@@ -1,7 +1,7 @@
 // Boundary sampling throughput: particles per second for the Stanford bunny scaled to
 // 0.5 m and for a 1-million-triangle torus, volumes included. Prints a table and writes JSON.
 //
-//   rime_bench_boundary [--repeats N] [--threads N] [--json FILE] [--mesh-dir DIR] [--case TEXT]
+//   rime-bench-boundary [--repeats N] [--threads N] [--json FILE] [--mesh-dir DIR] [--case TEXT]
 //
 // --case runs only the cases whose name contains TEXT (for profiling one of them).
 #include <fmt/format.h>
@@ -24,6 +24,7 @@
 #include "rime/core/log.h"
 #include "rime/exec/device.h"
 #include "rime/io/mesh_import.h"
+#include "rime/test/measure.h"
 
 namespace {
 
@@ -31,20 +32,8 @@ namespace fs = std::filesystem;
 using namespace rime;
 using Clock = std::chrono::steady_clock;
 
-// The 1-minute load average (other work on a shared machine), or -1 where /proc is absent.
-double LoadAverage() {
-  std::ifstream in("/proc/loadavg");
-  double load = -1;
-  in >> load;
-  return load;
-}
-
 double Seconds(Clock::time_point a, Clock::time_point b) { return std::chrono::duration<double>(b - a).count(); }
 
-double Median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  return v.size() % 2 ? v[v.size() / 2] : 0.5 * (v[v.size() / 2 - 1] + v[v.size() / 2]);
-}
 
 struct Case {
   std::string name;
@@ -75,23 +64,23 @@ nlohmann::json RunCase(const Case& c, int repeats) {
     triangles = mesh.triangle_count();
     particles = s.size();
   }
-  const double rate = double(particles) / Median(total);
-  const double cpu_rate = double(particles) / Median(cpu);
+  const double rate = double(particles) / test::Median(total);
+  const double cpu_rate = double(particles) / test::Median(cpu);
   fmt::print("| {:<28} | {:>9} | {:>9} | {:>8.3f} | {:>8.3f} | {:>8.3f} | {:>8.3f} | {:>9.2f} | {:>10.2f} |\n", c.name, triangles,
-             particles, Median(load), Median(sample), Median(volumes), Median(total), rate / 1e6, cpu_rate / 1e6);
+             particles, test::Median(load), test::Median(sample), test::Median(volumes), test::Median(total), rate / 1e6, cpu_rate / 1e6);
   return {{"case", c.name},
           {"triangles", triangles},
           {"particles", particles},
           {"particle_spacing", c.particle_spacing},
           {"boundary_spacing", 0.5 * c.particle_spacing},
-          {"load_seconds_median", Median(load)},
-          {"sample_seconds_median", Median(sample)},
-          {"volume_seconds_median", Median(volumes)},
-          {"sample_and_volume_seconds_median", Median(total)},
+          {"load_seconds_median", test::Median(load)},
+          {"sample_seconds_median", test::Median(sample)},
+          {"volume_seconds_median", test::Median(volumes)},
+          {"sample_and_volume_seconds_median", test::Median(total)},
           {"particles_per_second", rate},
-          {"cpu_seconds_median", Median(cpu)},
+          {"cpu_seconds_median", test::Median(cpu)},
           {"particles_per_cpu_second", cpu_rate},
-          {"particles_per_second_with_load", double(particles) / (Median(total) + Median(load))},
+          {"particles_per_second_with_load", double(particles) / (test::Median(total) + test::Median(load))},
           {"repeats", repeats}};
 }
 
@@ -99,7 +88,7 @@ nlohmann::json RunCase(const Case& c, int repeats) {
 
 int main(int argc, char** argv) {
   int repeats = 5, threads = 0;
-  std::string json_path = "boundary_bench.json", only;
+  std::string json_path = RIME_BENCH_OUTPUT_DIR "/results.json", only;
   fs::path mesh_dir = fs::path(RIME_SHARED_DIR) / "meshes";
   for (int i = 1; i + 1 < argc; i += 2) {
     if (!std::strcmp(argv[i], "--repeats")) repeats = std::max(1, std::atoi(argv[i + 1]));
@@ -131,7 +120,7 @@ int main(int argc, char** argv) {
   cases.push_back({"torus 1M triangles, d_p 2 cm", [] { return boundary::MakeTorus(0.5, 0.15, 0.00243); }, 0.02});
   cases.push_back({"box 4x3x1.5 m tank, d_p 1 cm", [] { return boundary::MakeBox(Vec3d(4, 3, 1.5), true, 0.005); }, 0.01});
 
-  const double load_start = LoadAverage();
+  const double load_start = test::LoadAverage();
   fmt::print("rime-boundary sampling + Akinci volumes, CPU, {} threads, median of {} runs (h = d_p, d_b = d_p/2), load average {:.2f}\n",
              exec::CpuThreads(), repeats, load_start);
   fmt::print("| {:<28} | {:>9} | {:>9} | {:>8} | {:>8} | {:>8} | {:>8} | {:>9} | {:>10} |\n", "case", "triangles", "particles",
@@ -142,9 +131,10 @@ int main(int argc, char** argv) {
     if (c.name.find(only) != std::string::npos) results.push_back(RunCase(c, repeats));
   fmt::print("(load = mesh file import or procedural tessellation, not included in M part/s; M/CPU-s = particles per\n"
              " second of process CPU time over all threads, which stays meaningful on a machine shared with other work)\n");
-  const double load_end = LoadAverage();
+  const double load_end = test::LoadAverage();
   fmt::print("load average at the end: {:.2f}\n", load_end);
-  std::ofstream(json_path) << nlohmann::json{{"benchmark", "boundary"}, {"threads", exec::CpuThreads()}, {"repeats", repeats},
+  std::ofstream(json_path) << nlohmann::json{{"benchmark", "boundary"}, {"machine", test::MachineDescription()},
+                                             {"commit", test::SourceCommit(RIME_SOURCE_DIR)}, {"threads", exec::CpuThreads()}, {"repeats", repeats},
                                              {"load_average_start", load_start}, {"load_average_end", load_end},
                                              {"results", results}}
                                   .dump(2)

@@ -1,5 +1,5 @@
 // What a farm task costs: bakes a 60-frame scene locally (rime-bake -j 1) and through
-// `rime-bake --farm slurm` on a single-node Slurm cluster on localhost (tests/farm/local_slurm.h),
+// `rime-bake --farm slurm` on a single-node Slurm cluster on localhost (rime/test/local_slurm.h),
 // then prints both wall times and, per Slurm task, the wait from submission to start and the time
 // from start to end beside the stage tools' own time (the rest is the task's overhead).
 //   rime-bench-farm [--frames N] [--chunk C] [--json FILE] [--keep]
@@ -19,9 +19,11 @@
 #include <sstream>
 #include <thread>
 
-#include "local_slurm.h"
+#include "rime/test/files.h"
+#include "rime/test/local_slurm.h"
+#include "rime/test/measure.h"
 
-#include "small_bake_scene.h"
+#include "rime/test/small_bake_scene.h"
 
 namespace fs = std::filesystem;
 using nlohmann::json;
@@ -31,19 +33,12 @@ namespace {
 
 std::string Scene(int frames) { return rime::test::SmallBakeScene("farm_bench", frames - 1); }
 
-std::string ReadFile(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  std::stringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
+using rime::test::ReadFile;
 
 int Run(const std::string& command) {
   const int status = std::system(command.c_str());
   return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
 }
-
-double Seconds(Clock::time_point a, Clock::time_point b) { return std::chrono::duration<double>(b - a).count(); }
 
 struct Stats {
   double mean = 0, median = 0, max = 0;
@@ -54,7 +49,7 @@ Stats Summarize(std::vector<double> v) {
   if (v.empty()) return s;
   std::sort(v.begin(), v.end());
   for (double x : v) s.mean += x / v.size();
-  s.median = v[v.size() / 2];
+  s.median = rime::test::Median(v);
   s.max = v.back();
   s.count = v.size();
   return s;
@@ -67,14 +62,14 @@ int main(int argc, char** argv) {
   CLI::App app{"Local bake (-j 1) against a farm bake on a localhost Slurm cluster: wall times and per-task overhead"};
   int frames = 60, chunk = 1;
   bool keep = false;
-  std::string json_path = RIME_BINARY_DIR "/farm_bench.json";
+  std::string json_path = RIME_BENCH_OUTPUT_DIR "/results.json";
   app.add_option("--frames", frames, "Frames of the scene")->check(CLI::Range(2, 1000))->capture_default_str();
   app.add_option("--chunk", chunk, "Frames per array task")->check(CLI::PositiveNumber)->capture_default_str();
   app.add_option("--json", json_path, "JSON output file")->capture_default_str();
   app.add_flag("--keep", keep, "Keep the temporary folder (outputs, logs, the cluster's logs)");
   CLI11_PARSE(app, argc, argv);
 
-  if (const auto missing = rime::testing::LocalSlurm::MissingBinary()) {
+  if (const auto missing = rime::test::LocalSlurm::MissingBinary()) {
     std::fprintf(stderr, "rime-bench-farm: Slurm is not installed (%s not found; Debian: apt install slurm-wlm)\n", missing->c_str());
     return 2;
   }
@@ -84,34 +79,34 @@ int main(int argc, char** argv) {
   std::ofstream(root / "site.toml") << fmt::format("[farm]\nchunk = {}\ncpus_per_task = 1\n", chunk);
   const std::string bake = RIME_BINARY_DIR "/bin/rime-bake";
   const auto command = [&](const std::string& out, const std::string& args) {
-    return fmt::format("'{}' '{}' cleanup -o '{}' {} > '{}/bake.txt' 2>&1", bake, (root / "scene.toml").string(), (root / out).string(), args,
+    return fmt::format("'{}' '{}' clean -o '{}' {} > '{}/bake.txt' 2>&1", bake, (root / "scene.toml").string(), (root / out).string(), args,
                        root.string());
   };
 
   // 1. Local, one frame at a time.
-  const auto local_start = Clock::now();
+  const rime::test::Stopwatch local_watch;
   if (Run(command("local", "-j 1 --json-summary " + (root / "local.json").string())) != 0) {
     std::fprintf(stderr, "local bake failed:\n%s", ReadFile(root / "bake.txt").c_str());
     return 1;
   }
-  const double local_wall = Seconds(local_start, Clock::now());
+  const double local_wall = local_watch.seconds();
   const json local = json::parse(ReadFile(root / "local.json"));
 
   // 2. The same bake through the localhost cluster, from submission until --farm status shows
   // nothing queued or running.
-  rime::testing::LocalSlurm cluster;
+  rime::test::LocalSlurm cluster;
   if (const std::string problem = cluster.Start(root / "slurm"); !problem.empty()) {
     std::fprintf(stderr, "cannot start the localhost Slurm cluster: %s\n", problem.c_str());
     return 1;
   }
   const std::string site = "--farm-config " + (root / "site.toml").string();
-  const auto farm_start = Clock::now();
+  const rime::test::Stopwatch farm_watch;
   const double submit_epoch = std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
   if (Run(command("farm", site + " --farm slurm --json-summary " + (root / "submit.json").string())) != 0) {
     std::fprintf(stderr, "submission failed:\n%s", ReadFile(root / "bake.txt").c_str());
     return 1;
   }
-  const double submit_seconds = Seconds(farm_start, Clock::now());
+  const double submit_seconds = farm_watch.seconds();
   json status;
   for (const auto deadline = Clock::now() + std::chrono::minutes(15);;) {
     Run(command("farm", site + " --farm status --json-summary " + (root / "status.json").string()));
@@ -126,7 +121,7 @@ int main(int argc, char** argv) {
     }
     std::this_thread::sleep_for(std::chrono::milliseconds(250));
   }
-  const double farm_wall = Seconds(farm_start, Clock::now());
+  const double farm_wall = farm_watch.seconds();
   int failed = 0;
   for (const auto& [stage, counts] : status["stages"].items()) failed += counts["failed"].get<int>() + counts["missing"].get<int>();
 
@@ -183,7 +178,7 @@ int main(int argc, char** argv) {
       run.push_back(t.end - t.start);
       tool.push_back(t.tool);
       overhead.push_back(t.end - t.start - t.tool);
-      if (group == "cleanup" && tasks["surface"].count(k)) latency.push_back(t.start - tasks["surface"][k].end);
+      if (group == "clean" && tasks["surface"].count(k)) latency.push_back(t.start - tasks["surface"][k].end);
       if (group == "surface") latency.push_back(t.end - frame_mtime(std::min(frames - 1, (k + 1) * chunk - 1)));
     }
     const Stats w = Summarize(wait), r = Summarize(run), tl = Summarize(tool), o = Summarize(overhead), l = Summarize(latency);
@@ -198,7 +193,9 @@ int main(int argc, char** argv) {
   const double sim_end = tasks["sim"].count(-1) ? tasks["sim"][-1].end : -1;
   for (const auto& [k, t] : tasks["surface"]) streamed += t.end > 0 && t.end < sim_end;
   std::printf("%d of %zu surface tasks finished before the simulation ended\n", streamed, tasks["surface"].size());
-  const json out = {{"frames", frames},
+  const json out = {{"machine", rime::test::MachineDescription()},
+                    {"commit", rime::test::SourceCommit(RIME_SOURCE_DIR)},
+                    {"frames", frames},
                     {"chunk", chunk},
                     {"cpus", std::thread::hardware_concurrency()},
                     {"local_wall_s", local_wall},

@@ -2,7 +2,7 @@
 // voxel = spacing / 2, anisotropic ellipsoids (stored D), against OpenVDB's isotropic
 // ParticlesToLevelSet + volumeToMesh on the same particles.
 //
-// Usage: rime_surface_bench [--sizes 50000,500000,2000000] [--runs 3] [--threads N] [--sheet] [--openvdb] [--json FILE]
+// Usage: rime-bench-surface [--sizes 50000,500000,2000000] [--runs 3] [--threads N] [--sheet] [--openvdb] [--json FILE]
 // --threads caps the worker threads (default: the CPUs the process may use); at --threads 1 "per
 // core" is measured directly instead of divided out of a shared machine's parallel run.
 // Peak memory is measured in a child process per case (fork), so cases do not inherit each
@@ -34,6 +34,7 @@
 #include <vector>
 
 #include "rime/surface/reconstruct.h"
+#include "rime/test/measure.h"
 
 using namespace rime;
 using Clock = std::chrono::steady_clock;
@@ -217,7 +218,7 @@ int main(int argc, char** argv) {
   std::vector<std::size_t> sizes{50000, 500000, 2000000};
   int runs = 3;
   bool openvdb_baseline = false;
-  std::string json_path = "surface_bench.json";
+  std::string json_path = RIME_BENCH_OUTPUT_DIR "/results.json";
   bool sheet = false;
   int threads = tbb::info::default_concurrency();  // the CPUs this process may use (taskset narrows it)
   for (int a = 1; a < argc; ++a) {
@@ -299,7 +300,10 @@ int main(int argc, char** argv) {
                          {"note", "peak memory includes the generated particle set (~100 bytes/particle)"}});
     }
   }
-  std::ofstream(json_path) << results.dump(2) << "\n";
+  const nlohmann::json document = {{"benchmark", "surface"}, {"machine", rime::test::MachineDescription()},
+                                   {"commit", rime::test::SourceCommit(RIME_SOURCE_DIR)}, {"threads", threads},
+                                   {"shape", sheet ? "sheet" : "ball"}, {"results", results}};
+  std::ofstream(json_path) << document.dump(2) << "\n";
   std::printf("wrote %s\n", json_path.c_str());
   return 0;
 }

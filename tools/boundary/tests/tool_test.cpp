@@ -7,6 +7,7 @@
 #include <sstream>
 
 #include "rime/io/particles.h"
+#include "rime/test/files.h"
 
 namespace {
 
@@ -28,15 +29,12 @@ class RimeBoundaryTool : public ::testing::Test {
     Write("tetra.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n");
   }
   void TearDown() override { fs::remove_all(dir_); }
-  void Write(const std::string& name, const std::string& text) { std::ofstream(dir_ / name, std::ios::binary) << text; }
+  void Write(const std::string& name, const std::string& text) { rime::test::WriteFile(dir_ / name, text); }
   Result Run(const std::string& args) {
     const fs::path err = dir_ / "stderr.txt";
     const std::string command = kTool.string() + " " + args + " -q 2> " + err.string() + " > /dev/null";
     const int status = std::system(command.c_str());
-    std::ifstream in(err);
-    std::stringstream text;
-    text << in.rdbuf();
-    return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, text.str()};
+    return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, rime::test::ReadFile(err)};
   }
   // Exit code 3, one error line naming `names`, and no output file.
   void ExpectBadInput(const std::string& args, const std::string& names, const fs::path& output) {
@@ -66,10 +64,8 @@ TEST_F(RimeBoundaryTool, MeshToFileWithTransformAndSummary) {
   for (const auto& p : frame.GetPositions<float>()) min_z = std::min(min_z, p.z), max_x = std::max(max_x, p.x);
   EXPECT_NEAR(min_z, 1.0f, 1e-6f);  // translated up by 1
   EXPECT_NEAR(max_x, 0.0f, 1e-6f);  // (2,0,0) rotated 90 deg about z -> (0,2,0)
-  std::ifstream in(summary);
-  std::stringstream text;
-  text << in.rdbuf();
-  EXPECT_NE(text.str().find("\"triangles_read\": 4"), std::string::npos) << text.str();
+  const std::string text = rime::test::ReadFile(summary);
+  EXPECT_NE(text.find("\"triangles_read\": 4"), std::string::npos) << text;
 }
 
 TEST_F(RimeBoundaryTool, SceneToFolder) {

@@ -11,8 +11,9 @@
 
 #include "rime/io/mesh.h"
 #include "rime/io/particles.h"
-#include "rime/meshfix/procedural.h"
-#include "rime/meshfix/quality.h"
+#include "rime/clean/procedural.h"
+#include "rime/clean/quality.h"
+#include "rime/test/files.h"
 
 namespace rime {
 namespace {
@@ -29,10 +30,7 @@ ToolRun Clean(const std::string& args, const fs::path& dir) {
   const fs::path err = dir / "stderr.txt";
   const std::string command = kTool.string() + " -q " + args + " 2> " + err.string();
   const int status = std::system(command.c_str());
-  std::ifstream in(err);
-  std::stringstream text;
-  text << in.rdbuf();
-  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, text.str()};
+  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, test::ReadFile(err)};
 }
 
 class CleanTool : public ::testing::Test {
@@ -49,11 +47,11 @@ class CleanTool : public ::testing::Test {
 };
 
 io::TriMesh NoisyBallWithSpeck() {
-  io::TriMesh m = meshfix::procedural::NoisyBall(8000, 1);
+  io::TriMesh m = clean::procedural::NoisyBall(8000, 1);
   for (const Vec3f& p : m.positions) m.velocities.push_back(Vec3f(1, 0, 0) + p * 2.0f);
-  io::TriMesh speck = meshfix::procedural::Icosphere(0.01, 0, {0.8, 0, 0});
+  io::TriMesh speck = clean::procedural::Icosphere(0.01, 0, {0.8, 0, 0});
   for (const Vec3f& p : speck.positions) speck.velocities.push_back(p);
-  meshfix::procedural::Append(m, speck);
+  clean::procedural::Append(m, speck);
   return m;
 }
 
@@ -64,7 +62,7 @@ TEST_F(CleanTool, OneMeshToOneFileWithReportAndVelocity) {
                       dir_);
   ASSERT_EQ(r.code, 0) << r.err;
   const io::TriMesh out = io::ReadMesh(dir_ / "clean.ply");
-  const meshfix::MeshStats s = meshfix::ComputeStats(out);
+  const clean::MeshStats s = clean::ComputeStats(out);
   EXPECT_EQ(s.components, 1u);
   EXPECT_TRUE(s.closed());
   EXPECT_EQ(out.velocities.size(), out.positions.size());
@@ -83,7 +81,7 @@ TEST_F(CleanTool, OneMeshToOneFileWithReportAndVelocity) {
 
 TEST_F(CleanTool, SequenceToFolderWithFramesAndFormat) {
   fs::create_directories(dir_ / "in");
-  for (int f = 1; f <= 3; ++f) io::WriteMesh(io::FramePath(dir_ / "in", "ice", f, "obj"), meshfix::procedural::NoisyBall(3000, f));
+  for (int f = 1; f <= 3; ++f) io::WriteMesh(io::FramePath(dir_ / "in", "ice", f, "obj"), clean::procedural::NoisyBall(3000, f));
   ToolRun r = Clean((dir_ / "in").string() + " -o " + (dir_ / "out").string() + " --frames 2-3 -j 2 --format ply", dir_);
   ASSERT_EQ(r.code, 0) << r.err;
   EXPECT_FALSE(fs::exists(dir_ / "out" / "ice_clean.0001.ply"));
@@ -103,8 +101,8 @@ TEST_F(CleanTool, SequenceToFolderWithFramesAndFormat) {
 }
 
 TEST_F(CleanTool, SceneDefaultsAndFlagsOverride) {
-  io::WriteMesh(dir_ / "ball.obj", meshfix::procedural::NoisyBall(6000, 2));
-  std::ofstream(dir_ / "scene.toml") << "[cleanup]\ndecimate_ratio = 0.25\nsmooth = \"none\"\n";
+  io::WriteMesh(dir_ / "ball.obj", clean::procedural::NoisyBall(6000, 2));
+  std::ofstream(dir_ / "scene.toml") << "[clean]\ndecimate_ratio = 0.25\nsmooth = \"none\"\n";
   ToolRun r = Clean((dir_ / "ball.obj").string() + " -o " + (dir_ / "a.obj").string() + " --scene " + (dir_ / "scene.toml").string(), dir_);
   ASSERT_EQ(r.code, 0) << r.err;
   r = Clean((dir_ / "ball.obj").string() + " -o " + (dir_ / "b.obj").string() + " --scene " + (dir_ / "scene.toml").string() +
@@ -114,7 +112,7 @@ TEST_F(CleanTool, SceneDefaultsAndFlagsOverride) {
   const double in = double(io::ReadMesh(dir_ / "ball.obj").triangle_count());
   EXPECT_NEAR(double(io::ReadMesh(dir_ / "a.obj").triangle_count()), 0.25 * in, 0.03 * in);
   EXPECT_NEAR(double(io::ReadMesh(dir_ / "b.obj").triangle_count()), 0.5 * in, 0.03 * in);
-  std::ofstream(dir_ / "bad.toml") << "[cleanup]\ndecimate_ratio = 2\n";
+  std::ofstream(dir_ / "bad.toml") << "[clean]\ndecimate_ratio = 2\n";
   r = Clean((dir_ / "ball.obj").string() + " -o " + (dir_ / "c.obj").string() + " --scene " + (dir_ / "bad.toml").string(), dir_);
   EXPECT_EQ(r.code, 3) << r.err;
   EXPECT_NE(r.err.find("bad.toml"), std::string::npos) << r.err;
@@ -134,7 +132,7 @@ TEST_F(CleanTool, BadInputsExitThreeWithoutOutput) {
     EXPECT_FALSE(fs::exists(out)) << name;
   }
   if (::geteuid() != 0) {  // root reads anything
-    io::WriteMesh(dir_ / "locked.obj", meshfix::procedural::Icosphere(1, 1));
+    io::WriteMesh(dir_ / "locked.obj", clean::procedural::Icosphere(1, 1));
     fs::permissions(dir_ / "locked.obj", fs::perms::none);
     const ToolRun r = Clean((dir_ / "locked.obj").string() + " -o " + (dir_ / "out_locked.obj").string(), dir_);
     EXPECT_EQ(r.code, 3) << r.err;
@@ -152,7 +150,7 @@ namespace {
 TEST_F(CleanTool, RefusesAboveTheMemoryBudgetBeforeWritingAnyFrame) {
   // Frame 0 is a small icosphere and would fit; frame 1 (about 8k triangles, OBJ and PLY) does not.
   fs::create_directories(dir_ / "surface");
-  io::WriteMesh(dir_ / "surface" / "ice.0000.ply", meshfix::procedural::Icosphere(0.1, 2, {0, 0, 0}));
+  io::WriteMesh(dir_ / "surface" / "ice.0000.ply", clean::procedural::Icosphere(0.1, 2, {0, 0, 0}));
   for (const char* ext : {"ply", "obj"}) {
     fs::remove_all(dir_ / "surface" / "ice.0001.ply");
     fs::remove_all(dir_ / "surface" / "ice.0001.obj");
@@ -175,7 +173,7 @@ TEST_F(CleanTool, RefusesAboveTheMemoryBudgetBeforeWritingAnyFrame) {
 TEST_F(CleanTool, SandboxRefusesASymlinkOutAndAnEscapingOutput) {
   fs::create_directories(dir_ / "box");
   fs::create_directories(dir_ / "outside");
-  io::WriteMesh(dir_ / "outside" / "ice.0001.ply", meshfix::procedural::Icosphere(0.1, 2, {0, 0, 0}));
+  io::WriteMesh(dir_ / "outside" / "ice.0001.ply", clean::procedural::Icosphere(0.1, 2, {0, 0, 0}));
   fs::create_symlink(dir_ / "outside" / "ice.0001.ply", dir_ / "box" / "ice.0001.ply");
   const std::string box = (dir_ / "box").string();
   const ToolRun link = Clean(box + "/ice.0001.ply -o " + box + "/clean --sandbox " + box, dir_);

@@ -7,6 +7,7 @@
 #include <fstream>
 
 #include "rime/io/particles.h"
+#include "rime/test/files.h"
 
 namespace fs = std::filesystem;
 
@@ -43,7 +44,7 @@ class SimTool : public ::testing::Test {
     const fs::path scene = dir_ / "scene.toml";
     std::ofstream(scene) << "[scene]\nfps = " << fps << "\nend_time = " << end_time << "\n"
                          << "[water]\nspacing = 0.04\n"
-                         << "[simulation]\nmodules = [\"gravity\", \"viscosity\", \"freezing\"]\n" << simulation_extra << "\n"
+                         << "[sim]\nmodules = [\"gravity\", \"viscosity\", \"freezing\"]\n" << simulation_extra << "\n"
                          << "[freezing]\nglaze_threshold = 0.01\nicicle_threshold = 0.002\n"
                          << "[[solid]]\nname = \"tank\"\nshape = \"box\"\ncontainer = true\nsize = [0.6, 0.6, 0.4]\ntranslate = [0, 0, 0.2]\n"
                          << "[[water_block]]\nmin = [-0.15, -0.15, 0.15]\nmax = [0.1, 0.1, 0.3]\nvelocity = [0.5, 0, -1]\n";
@@ -72,7 +73,7 @@ TEST_F(SimTool, InvalidSceneValueNamesFileLineAndField) {
   const fs::path scene = WriteScene("omega = 1.5");
   const Result r = Exec(Sim(scene, "sim"));
   EXPECT_EQ(r.code, 3) << r.output;
-  EXPECT_NE(r.output.find("scene.toml:8: simulation.omega"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("scene.toml:8: sim.omega"), std::string::npos) << r.output;
   EXPECT_FALSE(fs::exists(dir_ / "sim" / "particles.0000.h5part"));
 }
 
@@ -171,10 +172,9 @@ TEST_F(SimTool, RefusesAboveTheMemoryBudgetBeforeWritingAFrame) {
   fs::path scene = WriteScene("");
   {
     // The same scene at a 1 cm spacing: about 9.4 k water and 67 k boundary particles.
-    std::ifstream in(scene);
-    std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    std::string text = rime::test::ReadFile(scene);
     text.replace(text.find("spacing = 0.04"), 14, "spacing = 0.01");
-    std::ofstream(scene) << text;
+    rime::test::WriteFile(scene, text);
   }
   MakeBoundary(scene);
   const Result r = Exec(Sim(scene, "sim", "--memory-budget 1M"));

@@ -12,6 +12,7 @@
 
 #include "rime/io/mesh.h"
 #include "rime/io/particles.h"
+#include "rime/test/files.h"
 
 namespace {
 
@@ -27,10 +28,7 @@ RunResult Execute(const std::string& args) {
   // One log per process: ctest runs tests in parallel, and CI runs may overlap.
   const fs::path log = fs::temp_directory_path() / ("rime_surface_cli_" + std::to_string(getpid()) + ".log");
   const int status = std::system((kTool + " " + args + " > " + log.string() + " 2>&1").c_str());
-  std::ifstream in(log);
-  std::stringstream text;
-  text << in.rdbuf();
-  return {WEXITSTATUS(status), text.str()};
+  return {WEXITSTATUS(status), rime::test::ReadFile(log)};
 }
 
 // A ball of ice (with stored isotropic anisotropy unless `anisotropy` is false) and a ball of water.

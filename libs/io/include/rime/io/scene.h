@@ -91,7 +91,7 @@ inline std::span<const std::string_view> Names(AiiBoundary) {
   return names;
 }
 
-/// `[simulation]` (its `modules` list is Scene::modules).
+/// `[sim]` (its `modules` list is Scene::modules).
 struct SolverSettings {
   TimeStep time_step = TimeStep::kCfl;
   double dt = 0.001;
@@ -507,7 +507,7 @@ inline constexpr double kMaxSceneParticles = 1e9;      // per water block or emi
 inline constexpr std::int64_t kMaxSceneFrames = 1'000'000;  // end_time * fps
 inline constexpr std::uintmax_t kMaxSceneFileBytes = std::uintmax_t(1) << 28;  // 256 MiB
 
-/// Names accepted in `[simulation] modules = [...]`.
+/// Names accepted in `[sim] modules = [...]`.
 const std::vector<std::string>& KnownModules();
 
 Scene LoadScene(const std::filesystem::path& file);

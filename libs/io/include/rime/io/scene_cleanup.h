@@ -1,7 +1,7 @@
 /// @file scene_cleanup.h
-/// @brief `[cleanup]` section of the scene file (rime-clean settings).
+/// @brief `[clean]` section of the scene file (rime-clean settings).
 ///
-/// One struct is both the scene section and the options of rime::meshfix::Clean, so a default
+/// One struct is both the scene section and the options of rime::clean::Clean, so a default
 /// lives in exactly one place. Lengths in m, areas in m^2, volumes in m^3. docs/tools.md
 /// "rime-clean" explains the operations; the operations run in the order they are numbered here.
 #pragma once
@@ -157,7 +157,7 @@ struct CleanupSettings {
   }
 };
 
-/// Reads the `[cleanup]` table into `settings` (fields absent from the table keep their defaults).
+/// Reads the `[clean]` table into `settings` (fields absent from the table keep their defaults).
 void ParseCleanupSettings(TomlReader& table, CleanupSettings& settings);
 
 }  // namespace rime::io
