@@ -67,10 +67,11 @@ void DropChangedRows(const exec::Device& device, const Particles<T>& particles, 
 
 // Lists the rows of the `count` particles of `list` that have none, appending them to the pool.
 // When the pool has grown to twice what it held after its last reset (dropped rows leave gaps),
-// it is emptied first and every row listed again as it is needed.
+// it is emptied first and the rows of `list` are listed again (`may_reset` false: that relisting
+// must not empty it once more).
 template <class T>
 void ListRows(const exec::Device& device, const Particles<T>& particles, T support, const std::uint32_t* list, Index count,
-              FreezingWork<T>& work, DeviceArray<std::uint32_t>& slot) {
+              FreezingWork<T>& work, DeviceArray<std::uint32_t>& slot, bool may_reset = true) {
   work.row_flags.resize(count);
   exec::ParallelFor(device, count, kernels::MarkRowless{.list = list, .length = work.row_length.data(), .flags = work.row_flags.data()});
   const Index rowless = exec::ListFlagged(device, work.row_flags, count, slot, work.row_list);
@@ -80,7 +81,8 @@ void ListRows(const exec::Device& device, const Particles<T>& particles, T suppo
   exec::ParallelFor(device, rowless, exec::Gather<Vec3<T>>{particles.boundary_x, work.row_list.data(), work.row_x.data()});
   particles.boundary_grid->Query(work.row_x.data(), rowless, support, false, work.new_rows);
   const std::size_t pairs = work.new_rows.indices.size();
-  const bool reset = work.row_pool_used > 0 && work.row_pool_used + pairs > 2 * work.row_pool_after_reset + (std::size_t(1) << 20);
+  const bool reset =
+      may_reset && work.row_pool_used > 0 && work.row_pool_used + pairs > 2 * work.row_pool_after_reset + (std::size_t(1) << 16);
   if (reset) {
     work.row_length.SetZero();
     work.row_pool_used = 0;
@@ -96,7 +98,7 @@ void ListRows(const exec::Device& device, const Particles<T>& particles, T suppo
   work.row_pool_used += pairs;
   work.new_rows.indices.release();  // scratch that may hold a whole listing (or the pool's old storage)
   if (work.row_pool_after_reset == 0 || reset) {
-    if (reset) ListRows(device, particles, support, list, count, work, slot);  // the rows the reset dropped
+    if (reset) ListRows(device, particles, support, list, count, work, slot, false);  // the rows the reset dropped
     work.row_pool_after_reset = work.row_pool_used;
   }
 }

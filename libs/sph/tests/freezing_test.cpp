@@ -346,7 +346,8 @@ TEST(Freezing, ResumeWithNucleationDelayIsBitIdentical) {
 // recomputes them all each time (Restore drops the caches). Both must give the same film, ice and
 // water, bit for bit. `wet_boundary` starts both with every boundary particle's film at that
 // value: a large region where few films change (the Laplacians around the changes are updated),
-// where a dry start has most of a small region change (all of it is evaluated).
+// where a dry start has most of a small region change (all of it is evaluated). Both runs also
+// empty and refill the pool of kept neighbour lists a few times as their region grows.
 void ExpectCachesMatchRecomputing(float wet_boundary) {
   const io::Scene scene = DropScene(0.05, 0.01);
   auto start = [&](Simulation<float>& sim) {
