@@ -44,6 +44,66 @@ FreezeParams<T> MakeFreezeParams(const io::Scene& scene) {
 
 namespace {
 
+// Drops the Laplacian rows that changes of the boundary made wrong: all of them when it moved,
+// its caches were dropped or its grid changed cells; else those of the particles within the
+// support of new ice (structure_touched). A row farther from new ice keeps its neighbours and
+// their order: new ice is appended, and the grid's stable sort bins it after the older particles.
+template <class T>
+void DropChangedRows(const exec::Device& device, const Particles<T>& particles, FreezingWork<T>& work, DeviceArray<std::uint32_t>& slot) {
+  const Index nb = particles.nb;
+  work.row_begin.resize(nb);
+  work.row_length.resize(nb);  // new particles have no row (length 0)
+  const neighbors::GridView<T> grid = particles.boundary_grid->view();
+  if (!work.diffusion_cache_valid || particles.boundary_moves || !(grid.origin == work.row_grid_origin) ||
+      grid.inv_cell != work.row_grid_inv_cell) {
+    work.row_length.SetZero();
+    work.row_pool_used = work.row_pool_after_reset = 0;
+    work.row_grid_origin = grid.origin;
+    work.row_grid_inv_cell = grid.inv_cell;
+    return;
+  }
+  const Index changed = exec::ListFlagged(device, work.structure_touched, nb, slot, work.change_list);
+  exec::ParallelFor(device, changed, kernels::ClearListed{.list = work.change_list.data(), .flags = work.row_length.data()});
+}
+
+// Lists the rows of the `count` particles of `list` that have none, appending them to the pool.
+// When the pool has grown to twice what it held after its last reset (dropped rows leave gaps),
+// it is emptied first and the rows of `list` are listed again (`may_reset` false: that relisting
+// must not empty it once more).
+template <class T>
+void ListRows(const exec::Device& device, const Particles<T>& particles, T support, const std::uint32_t* list, Index count,
+              FreezingWork<T>& work, DeviceArray<std::uint32_t>& slot, bool may_reset = true) {
+  work.row_flags.resize(count);
+  exec::ParallelFor(device, count, kernels::MarkRowless{.list = list, .length = work.row_length.data(), .flags = work.row_flags.data()});
+  const Index rowless = exec::ListFlagged(device, work.row_flags, count, slot, work.row_list);
+  if (rowless == 0) return;
+  exec::ParallelFor(device, rowless, exec::Gather<std::uint32_t>{list, work.row_list.data(), work.row_list.data()});  // in place: i reads and writes i
+  work.row_x.resize(rowless);
+  exec::ParallelFor(device, rowless, exec::Gather<Vec3<T>>{particles.boundary_x, work.row_list.data(), work.row_x.data()});
+  particles.boundary_grid->Query(work.row_x.data(), rowless, support, false, work.new_rows);
+  const std::size_t pairs = work.new_rows.indices.size();
+  const bool reset =
+      may_reset && work.row_pool_used > 0 && work.row_pool_used + pairs > 2 * work.row_pool_after_reset + (std::size_t(1) << 16);
+  if (reset) {
+    work.row_length.SetZero();
+    work.row_pool_used = 0;
+  }
+  // An empty pool takes the lists' storage (storing them onto themselves) rather than a copy.
+  if (work.row_pool_used == 0) work.row_pool.swap(work.new_rows.indices);
+  work.row_pool.resize(work.row_pool_used + pairs);
+  const std::uint32_t* indices = work.row_pool_used == 0 ? work.row_pool.data() : work.new_rows.indices.data();
+  exec::ParallelFor(device, rowless,
+                    kernels::StoreRows{.list = work.row_list.data(), .offsets = work.new_rows.offsets.data(), .indices = indices,
+                                       .base = std::uint32_t(work.row_pool_used), .begin = work.row_begin.data(),
+                                       .length = work.row_length.data(), .pool = work.row_pool.data()});
+  work.row_pool_used += pairs;
+  work.new_rows.indices.release();  // scratch that may hold a whole listing (or the pool's old storage)
+  if (work.row_pool_after_reset == 0 || reset) {
+    if (reset) ListRows(device, particles, support, list, count, work, slot, false);  // the rows the reset dropped
+    work.row_pool_after_reset = work.row_pool_used;
+  }
+}
+
 // The film diffusion's region (spec §9.3: the wet particles and their one-ring) in
 // work.region_list; returns its size. With valid caches only what changed since the last call is
 // looked at: the particles that became wet grow it, the boundary changed by new ice joins it, and
@@ -53,6 +113,7 @@ Index UpdateDiffusionRegion(const exec::Device& device, const Particles<T>& part
                             FreezingWork<T>& work, DeviceArray<std::uint32_t>& slot) {
   const Index nb = particles.nb;
   const neighbors::GridView<T> grid = particles.boundary_grid->view();
+  DropChangedRows(device, particles, work, slot);
   work.wet.resize(nb);
   exec::ParallelFor(device, nb, kernels::MarkWet<T>{.film = film.film.data(), .wet = work.wet.data()});
   work.newly_wet.resize(nb);
@@ -80,24 +141,37 @@ Index UpdateDiffusionRegion(const exec::Device& device, const Particles<T>& part
 }
 
 // The region particles whose Laplacian (and stability bound) must be evaluated before the next
-// diffusion step, in work.change_list; returns how many. A Laplacian depends on the films,
-// volumes and positions within its support, so those around a changed film or a changed
-// boundary particle are evaluated, and those that entered the region; the others keep theirs.
+// diffusion step, listed in `list` (work.change_list or work.region_list); returns how many. A
+// Laplacian depends on the films, volumes and positions within its support, so those around a
+// changed film or a changed boundary particle are evaluated, and those that entered the region;
+// the others keep theirs. Marking around a changed film costs about what evaluating a Laplacian
+// does, so when the changed films are many the whole region is evaluated instead (evaluation is
+// deterministic: the values are the same).
 template <class T>
-Index EvaluationList(const exec::Device& device, const Particles<T>& particles, T support, FreezingWork<T>& work,
-                     DeviceArray<std::uint32_t>& slot) {
+Index EvaluationList(const exec::Device& device, const Particles<T>& particles, T support, Index region, FreezingWork<T>& work,
+                     DeviceArray<std::uint32_t>& slot, const std::uint32_t*& list) {
   const Index nb = particles.nb;
   const neighbors::GridView<T> grid = particles.boundary_grid->view();
   work.evaluate.resize(nb);
   work.evaluate.SetZero();
+  const Index film_changes = exec::ListFlagged(device, work.film_touched, nb, slot, work.change_list);
+  if (2 * film_changes >= region) {
+    work.film_touched.SetZero();
+    work.structure_touched.SetZero();
+    exec::ParallelFor(device, nb, kernels::AddStale{.region = work.region.data(), .stale = work.stale.data(), .evaluate = work.evaluate.data()});
+    list = work.region_list.data();
+    return region;
+  }
   for (DeviceArray<std::uint32_t>* changed : {&work.film_touched, &work.structure_touched}) {
-    const Index count = exec::ListFlagged(device, *changed, nb, slot, work.change_list);
+    const Index count = changed == &work.film_touched ? film_changes : exec::ListFlagged(device, *changed, nb, slot, work.change_list);
     exec::ParallelFor(device, count, kernels::MarkAffected<T>{.grid = grid, .list = work.change_list.data(), .region = work.region.data(),
                                                               .radius = support, .evaluate = work.evaluate.data()});
     changed->SetZero();
   }
   exec::ParallelFor(device, nb, kernels::AddStale{.region = work.region.data(), .stale = work.stale.data(), .evaluate = work.evaluate.data()});
-  return exec::ListFlagged(device, work.evaluate, nb, slot, work.change_list);
+  const Index count = exec::ListFlagged(device, work.evaluate, nb, slot, work.change_list);
+  list = work.change_list.data();
+  return count;
 }
 
 }  // namespace
@@ -165,9 +239,12 @@ Index FreezeStep(const exec::Device& device, const io::Scene& scene, const Parti
     if (region > 0) {
       // Laplacians where they may have changed (the list is rebuilt first: it may move in memory).
       const auto evaluate = [&] {
-        const Index count = EvaluationList(device, particles, support, work, slot);
+        const std::uint32_t* list = nullptr;
+        const Index count = EvaluationList(device, particles, support, region, work, slot, list);
+        ListRows(device, particles, support, list, count, work, slot);
         exec::ParallelFor(device, count,
-                          kernels::FilmLaplacian<T>{.list = work.change_list.data(), .grid = particles.boundary_grid->view(),
+                          kernels::FilmLaplacian<T>{.list = list, .x = particles.boundary_x,
+                                                    .rows = {work.row_begin.data(), work.row_length.data(), work.row_pool.data()},
                                                     .volume = particles.boundary_volume, .film = film.film.data(), .kernel = kernel,
                                                     .epsilon = T(particles.viscosity_epsilon), .laplacian = work.laplacian.data(),
                                                     .lambda = work.lambda.data()});

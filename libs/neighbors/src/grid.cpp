@@ -148,6 +148,53 @@ struct CellCandidates {
     }
     return k;
   }
+
+  /// W and ∇W of the first `found` matches kept with Keep::kOffsets: the values of
+  /// kernels::PairValues, bit for bit. With AVX2, kLanes pairs at a time: W's and B''s pieces are
+  /// clamped instead of branched on (a clamped piece is exactly zero), and every operation rounds
+  /// as the compiled scalar kernel does: q is rounded before use (the barrier stops it being
+  /// fused into 2 − q), the cubes and squares are rounded, and only the last term of B and B' is
+  /// fused. CpuQueryGridMatchesTheKernelsExactly checks it.
+  void Values(std::size_t found, const CubicSpline<T>& kernel, T* w, Vec3<T>* grad) {
+#if defined(__AVX2__)
+    if constexpr (std::is_same_v<T, float>) {
+      typedef float Block __attribute__((vector_size(32)));
+      const Block zero{}, one = zero + T(1), two = zero + T(2), tiny = zero + T(1e-9) * kernel.h;
+      T wk[kLanes], gx[kLanes], gy[kLanes], gz[kLanes];
+      for (std::size_t k = 0; k < found; k += kLanes) {
+        Block x, y, z;
+        __builtin_memcpy(&x, &rx[k], sizeof x);
+        __builtin_memcpy(&y, &ry[k], sizeof y);
+        __builtin_memcpy(&z, &rz[k], sizeof z);
+        const Block len = Block(_mm256_sqrt_ps(__m256(x * x + y * y + z * z)));
+        Block q = len * kernel.inv_h;
+        asm("" : "+x"(q));
+        const Block a = q < two ? two - q : zero, b = q < one ? one - q : zero;
+        const Block cube = a * a * a, b4 = T(4) * b * b, a3 = T(-3) * a * a, b12 = T(12) * b;
+        const Block shape = Block(_mm256_fnmadd_ps(__m256(b4), __m256(b), __m256(cube)));
+        const Block derivative = Block(_mm256_fmadd_ps(__m256(b12), __m256(b), __m256(a3)));
+        const Block factor = len < tiny ? zero : kernel.grad_norm * derivative / len;
+        const Block value = kernel.w_norm * shape;
+        const Block px = x * factor, py = y * factor, pz = z * factor;
+        __builtin_memcpy(wk, &value, sizeof wk);
+        __builtin_memcpy(gx, &px, sizeof gx);
+        __builtin_memcpy(gy, &py, sizeof gy);
+        __builtin_memcpy(gz, &pz, sizeof gz);
+        for (std::size_t l = 0, e = std::min<std::size_t>(kLanes, found - k); l < e; ++l) {
+          w[k + l] = wk[l];
+          grad[k + l] = Vec3<T>(gx[l], gy[l], gz[l]);
+        }
+      }
+      return;
+    }
+#endif
+    for (std::size_t k = 0; k < found; ++k) {
+      const Vec3<T> r(rx[k], ry[k], rz[k]);
+      const T len = Norm(r);
+      w[k] = kernel.W(len);
+      grad[k] = r * kernel.GradientFactor(len);
+    }
+  }
 };
 
 }  // namespace
@@ -380,15 +427,7 @@ void UniformGrid<T>::CpuQueryByCell(const UniformGrid& queries, T radius, bool e
     const std::size_t found = values ? cand.template Match<Keep::kOffsets>(source.points[i], r2max, self)
                                      : cand.template Match<Keep::kIndices>(source.points[i], r2max, self);
     std::copy_n(cand.match_j.data(), found, indices + first);
-    if (!values) return;
-    // The expressions of kernels::PairValues, so the values are the same bits.
-    const CubicSpline<T> kernel = values->kernel;
-    for (std::size_t k = 0; k < found; ++k) {
-      const Vec3<T> r(cand.rx[k], cand.ry[k], cand.rz[k]);
-      const T len = Norm(r);
-      w[first + k] = kernel.W(len);
-      grad[first + k] = r * kernel.GradientFactor(len);
-    }
+    if (values) cand.Values(found, values->kernel, w + first, grad + first);
   });
 }
 

@@ -84,7 +84,8 @@ struct FreezingWork : exec::AttributeGroup<FreezingWork<T>> {
   explicit FreezingWork(const exec::Device& d)
       : fluid_d(d), fluid_flag(d), boundary_active(d), active_list(d), decision(d), trigger(d), frozen(d), wet(d), region(d),
         region_list(d), energy_solid(d), energy_ice(d), laplacian(d), lambda(d), active_x(d), bf(d), wet_seen(d), newly_wet(d), dried(d),
-        stale(d), evaluate(d), film_touched(d), structure_touched(d), change_list(d), region_lambda(d) {}
+        stale(d), evaluate(d), film_touched(d), structure_touched(d), change_list(d), region_lambda(d), row_begin(d), row_length(d),
+        row_pool(d), row_flags(d), row_list(d), row_x(d), new_rows(d) {}
   DeviceArray<Sym6<T>> fluid_d;  // water: anisotropy D of this step
   DeviceArray<std::uint32_t> fluid_flag, boundary_active, active_list, decision, trigger, frozen, wet, region, region_list;
   DeviceArray<T> energy_solid, energy_ice, laplacian, lambda;  // laplacian, lambda: per boundary particle
@@ -93,6 +94,16 @@ struct FreezingWork : exec::AttributeGroup<FreezingWork<T>> {
   DeviceArray<std::uint32_t> wet_seen, newly_wet, dried, stale, evaluate, film_touched, structure_touched, change_list;
   DeviceArray<T> region_lambda;
   bool diffusion_cache_valid = false;  // the solver clears it when the boundary moves or is restored
+  // The film Laplacian's neighbour rows (kernels::NeighborRows), listed when a particle is first
+  // evaluated and kept until the boundary moves or changes near it; row_pool[0, row_pool_used)
+  // holds them (rows dropped near new ice leave gaps until the pool is listed anew).
+  DeviceArray<std::uint32_t> row_begin, row_length, row_pool, row_flags, row_list;
+  DeviceArray<Vec3<T>> row_x;
+  neighbors::NeighborList new_rows;
+  std::size_t row_pool_used = 0;
+  std::size_t row_pool_after_reset = 0;  // what the pool held right after it was last emptied and refilled
+  Vec3<T> row_grid_origin{};             // the grid cells the rows were listed in (their order follows them)
+  T row_grid_inv_cell = 0;
 
   template <class Self, class F>
   static void Visit(Self& s, F& f) {
@@ -122,6 +133,14 @@ struct FreezingWork : exec::AttributeGroup<FreezingWork<T>> {
     f(AttributeInfo{.name = "structure_touched"}, s.structure_touched);
     f(AttributeInfo{.name = "change_list"}, s.change_list);
     f(AttributeInfo{.name = "region_lambda"}, s.region_lambda);
+    f(AttributeInfo{.name = "row_begin"}, s.row_begin);
+    f(AttributeInfo{.name = "row_length"}, s.row_length);
+    f(AttributeInfo{.name = "row_pool"}, s.row_pool);
+    f(AttributeInfo{.name = "row_flags"}, s.row_flags);
+    f(AttributeInfo{.name = "row_list"}, s.row_list);
+    f(AttributeInfo{.name = "row_positions"}, s.row_x);
+    f(AttributeInfo{.name = "new_row_offsets"}, s.new_rows.offsets);
+    f(AttributeInfo{.name = "new_row_indices"}, s.new_rows.indices);
   }
 };
 

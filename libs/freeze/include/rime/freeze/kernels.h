@@ -262,12 +262,56 @@ struct GatherListed {
   RIME_HD void operator()(Index k) const { out[k] = values[list[k]]; }
 };
 
+/// Neighbour rows kept per boundary particle while the boundary does not move: the particles
+/// within the support of b, itself included, in the grid's query order, are
+/// pool[begin[b] .. begin[b] + length[b]); length 0 means b has no row yet.
+struct NeighborRows {
+  const std::uint32_t* begin;
+  const std::uint32_t* length;
+  const std::uint32_t* pool;
+};
+
+/// flags[k] = 1 where the listed particle list[k] has no row yet.
+struct MarkRowless {
+  const std::uint32_t* list;
+  const std::uint32_t* length;
+  std::uint32_t* flags;
+  RIME_HD void operator()(Index k) const { flags[k] = length[list[k]] == 0 ? 1u : 0u; }
+};
+
+/// Stores the CSR lists of the listed particles (row i for particle list[i]) as their rows, at
+/// `base` in the pool.
+struct StoreRows {
+  const std::uint32_t* list;
+  const std::uint32_t* offsets;
+  const std::uint32_t* indices;
+  std::uint32_t base;
+  std::uint32_t* begin;
+  std::uint32_t* length;
+  std::uint32_t* pool;
+  RIME_HD void operator()(Index i) const {
+    const std::uint32_t b = list[i], first = offsets[i], end = offsets[i + 1];
+    begin[b] = base + first;
+    length[b] = end - first;
+    for (std::uint32_t m = first; m < end; ++m) pool[base + m] = indices[m];
+  }
+};
+
+/// flags[list[k]] = 0 for every listed particle (drops the rows of particles near new ice).
+struct ClearListed {
+  const std::uint32_t* list;
+  std::uint32_t* flags;
+  RIME_HD void operator()(Index k) const { flags[list[k]] = 0u; }
+};
+
 /// Conservative SPH Laplacian of the film over the boundary graph (spec §9.3):
-/// L_b = 2 Σ_k V̄_bk (Γ_k − Γ_b)(−x_bk·∇W_bk)/(r²+εh²); also the stability bound λ_b.
+/// L_b = 2 Σ_k V̄_bk (Γ_k − Γ_b)(−x_bk·∇W_bk)/(r²+εh²); also the stability bound λ_b. The
+/// neighbours come from the rows, in the grid's order, so the sums are those of a grid query.
 template <class T>
 struct FilmLaplacian {
   const std::uint32_t* list;
-  neighbors::GridView<T> grid;
+  const Vec3<T>* x;  // boundary positions
+  NeighborRows rows;
   const T* volume;
   const T* film;
   CubicSpline<T> kernel;
@@ -276,16 +320,19 @@ struct FilmLaplacian {
   T* lambda;     // per boundary particle (of the listed ones)
   RIME_HD void operator()(Index k) const {
     const std::uint32_t b = list[k];
-    const Vec3<T> xb = grid.points[b];
+    const Vec3<T> xb = x[b];
     const T fb = film[b], vb = volume[b], eps_h2 = epsilon * kernel.h * kernel.h;
     T l = T(0), lam = T(0);
-    grid.ForEachNeighbor(xb, kernel.SupportRadius(), [&](std::uint32_t n, const Vec3<T>&, T r2) {
-      if (n == b) return;
+    for (std::uint32_t m = rows.begin[b], e = m + rows.length[b]; m < e; ++m) {
+      const std::uint32_t n = rows.pool[m];
+      if (n == b) continue;
+      const Vec3<T> r = xb - x[n];
+      const T r2 = Dot(r, r);
       // −x·∇W = −φ r² with φ = B'(q) σ/(h⁴ r) <= 0.
       const T weight = T(2) * T(0.5) * (vb + volume[n]) * (-kernel.GradientFactor(std::sqrt(r2)) * r2) / (r2 + eps_h2);
       l += weight * (film[n] - fb);
       lam += weight;
-    });
+    }
     laplacian[b] = l;
     lambda[b] = lam;
   }
@@ -442,4 +489,5 @@ struct KeepUnfrozen {
 #define RIME_FREEZE_KERNELS(X)                                                                                   \
   RIME_FREEZE_KERNELS_T(X, float) RIME_FREEZE_KERNELS_T(X, double) X(rime::freeze::kernels::MarkFluidFromBoundary) \
   X(rime::freeze::kernels::KeepUnfrozen) X(rime::freeze::kernels::WetChanges) X(rime::freeze::kernels::AddStale)    \
-  X(rime::freeze::kernels::FlagListed)
+  X(rime::freeze::kernels::FlagListed) X(rime::freeze::kernels::MarkRowless) X(rime::freeze::kernels::StoreRows)           \
+  X(rime::freeze::kernels::ClearListed)
