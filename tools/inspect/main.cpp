@@ -111,15 +111,14 @@ int main(int argc, char** argv) {
     for (std::int64_t f : frames) {
       const io::ParticleFrame frame = io::ReadParticleFrame(io::FramePath(sim, "particles", f, "h5part"), "particles");
       const fs::path mesh_file = io::FramePath(meshes, stem, f, "obj");
-      if (!fs::exists(mesh_file)) {
-        // A frame without ice may have no mesh; one with ice and no mesh is not cleaned yet and would read as "no ice".
-        const auto& phase = frame.Get<std::uint8_t>("phase");
-        if (std::count(phase.begin(), phase.end(), std::uint8_t(io::Phase::kIce)) > 0) {
-          log::Warn("frame {}: {} is missing (not cleaned yet?); frame skipped", f, mesh_file.string());
-          continue;
-        }
+      const bool has_mesh = fs::exists(mesh_file);
+      // A frame without ice may have no mesh; one with ice and no mesh is not cleaned yet and would read as "no ice".
+      const auto& phase = frame.Get<std::uint8_t>("phase");
+      if (!has_mesh && std::find(phase.begin(), phase.end(), std::uint8_t(io::Phase::kIce)) != phase.end()) {
+        log::Warn("frame {}: {} is missing (not cleaned yet?); frame skipped", f, mesh_file.string());
+        continue;
       }
-      const io::TriMesh mesh = fs::exists(mesh_file) ? io::ReadMesh(mesh_file) : io::TriMesh{};
+      const io::TriMesh mesh = has_mesh ? io::ReadMesh(mesh_file) : io::TriMesh{};
       const clean::IceMetrics m = clean::MeasureIce(mesh, frame, scene.solver.gravity, objects, settings);
       fmt::print("{:>5} {:>6} {:>6} {:>6} {:>6} {:>5} {:>7.2f} {:>6.3f} {:>6.3f} {:>6.2f} {:>4.2f}±{:<4.2f} {:>7} {:>7} {:>6.1f} {:>6.1f}\n",
                  f, m.water, m.ice, m.components, m.specks, m.tiny_pieces, m.handles_per_1000_dp2, m.noise_rms,

@@ -63,7 +63,7 @@ void DropChangedRows(const exec::Device& device, const Particles<T>& particles, 
     return;
   }
   const Index changed = exec::ListFlagged(device, work.structure_touched, nb, slot, work.change_list);
-  exec::ParallelFor(device, changed, kernels::ClearListed{.list = work.change_list.data(), .flags = work.row_length.data()});
+  exec::ParallelFor(device, changed, kernels::SetListed{.list = work.change_list.data(), .value = 0u, .flags = work.row_length.data()});
 }
 
 // Lists the rows of the `count` particles of `list` that have none, appending them to the pool.

@@ -92,7 +92,7 @@ void Simulation<T>::ConvertToIce(const DeviceArray<std::uint32_t>& frozen_list, 
   FinishBoundaryVolumes();
   // The film diffusion re-evaluates around them (its caches hold until the boundary changes).
   w.structure_touched.resize(s.nb());
-  exec::ParallelFor(device_, dirty, freeze::kernels::FlagListed{.list = w.change_list.data(), .flags = w.structure_touched.data()});
+  exec::ParallelFor(device_, dirty, freeze::kernels::SetListed{.list = w.change_list.data(), .value = 1u, .flags = w.structure_touched.data()});
 }
 
 template void Simulation<float>::Freeze(double);

@@ -246,11 +246,12 @@ struct AddStale {
   }
 };
 
-/// flags[list[k]] = 1 for every listed particle.
-struct FlagListed {
+/// flags[list[k]] = value for every listed particle.
+struct SetListed {
   const std::uint32_t* list;
+  std::uint32_t value;
   std::uint32_t* flags;
-  RIME_HD void operator()(Index k) const { flags[list[k]] = 1u; }
+  RIME_HD void operator()(Index k) const { flags[list[k]] = value; }
 };
 
 /// out[k] = values[list[k]].
@@ -295,13 +296,6 @@ struct StoreRows {
     length[b] = end - first;
     for (std::uint32_t m = first; m < end; ++m) pool[base + m] = indices[m];
   }
-};
-
-/// flags[list[k]] = 0 for every listed particle (drops the rows of particles near new ice).
-struct ClearListed {
-  const std::uint32_t* list;
-  std::uint32_t* flags;
-  RIME_HD void operator()(Index k) const { flags[list[k]] = 0u; }
 };
 
 /// Conservative SPH Laplacian of the film over the boundary graph (spec §9.3):
@@ -489,5 +483,4 @@ struct KeepUnfrozen {
 #define RIME_FREEZE_KERNELS(X)                                                                                   \
   RIME_FREEZE_KERNELS_T(X, float) RIME_FREEZE_KERNELS_T(X, double) X(rime::freeze::kernels::MarkFluidFromBoundary) \
   X(rime::freeze::kernels::KeepUnfrozen) X(rime::freeze::kernels::WetChanges) X(rime::freeze::kernels::AddStale)    \
-  X(rime::freeze::kernels::FlagListed) X(rime::freeze::kernels::MarkRowless) X(rime::freeze::kernels::StoreRows)           \
-  X(rime::freeze::kernels::ClearListed)
+  X(rime::freeze::kernels::SetListed) X(rime::freeze::kernels::MarkRowless) X(rime::freeze::kernels::StoreRows)
