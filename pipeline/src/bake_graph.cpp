@@ -18,8 +18,9 @@ constexpr const char* kStageNames[kStageCount] = {"boundary", "sim", "surface", 
 fs::path RequireTool(const GraphOptions& options, const std::string& name) {
   const fs::path program = options.tools_folder / name;
   if (access(program.c_str(), X_OK) != 0)
-    throw InputError(fmt::format("stage tool {} not found or not executable (build it, or point --tools at the folder that holds it)", name),
-                     program.string());
+    throw InputError(
+        fmt::format("stage tool {} not found or not executable (build it, or point --tools at the folder that holds it)", name),
+        program.string());
   return program;
 }
 
@@ -72,8 +73,8 @@ std::vector<Job> BuildGraph(const SceneDocument& doc, const BakeLayout& layout, 
   // Limits that do not change results: after the key arguments, like -j and --device.
   const auto limits = [&](Job& job, bool per_frame) {
     if (options.memory_budget > 0) {
-      const std::uint64_t share = per_frame ? options.memory_budget / std::uint64_t(std::max(1, options.parallel_frames))
-                                            : options.memory_budget;
+      const std::uint64_t share =
+          per_frame ? options.memory_budget / std::uint64_t(std::max(1, options.parallel_frames)) : options.memory_budget;
       job.args.insert(job.args.end(), {"--memory-budget", std::to_string(std::max<std::uint64_t>(share, 1))});
     }
     if (!options.sandbox.empty()) job.args.insert(job.args.end(), {"--sandbox", options.sandbox.string()});
@@ -152,9 +153,10 @@ std::vector<Job> BuildGraph(const SceneDocument& doc, const BakeLayout& layout, 
   const std::string cleaned_phase = phases.front();
   const char* mesh_format = has_format("obj") ? "obj" : "ply";
   if (target >= Stage::kClean && !has_format("obj") && !has_format("ply"))
-    throw InputError("[surface] formats has no mesh format (obj or ply), so the clean stage has nothing to clean; add \"obj\" or "
-                     "bake only up to the surface stage",
-                     scene_path + ": surface.formats");
+    throw InputError(
+        "[surface] formats has no mesh format (obj or ply), so the clean stage has nothing to clean; add \"obj\" or "
+        "bake only up to the surface stage",
+        scene_path + ": surface.formats");
   const fs::path preview_data = layout.cache() / "preview";
   const bool preview = target == Stage::kPreview && options.blender.has_value();
   for (std::int64_t f = first; f <= last; ++f) {
@@ -203,9 +205,20 @@ std::vector<Job> BuildGraph(const SceneDocument& doc, const BakeLayout& layout, 
     const fs::path clean_mesh = io::FramePath(layout.clean(), cleaned, f, "obj");
     const fs::path water_mesh = io::FramePath(layout.surface(), "water", f, "obj");
     const fs::path image = io::FramePath(layout.preview(), "frame", f, "png");
-    render.args = {"--background", "--factory-startup", "-noaudio", "--python", (preview_data / "render_preview.py").string(), "--",
-                   "--setup", (preview_data / "preview_scene.json").string(), "--ice", clean_mesh.string(),
-                   "--water", water_mesh.string(), "--output", image.string()};
+    render.args = {"--background",
+                   "--factory-startup",
+                   "-noaudio",
+                   "--python",
+                   (preview_data / "render_preview.py").string(),
+                   "--",
+                   "--setup",
+                   (preview_data / "preview_scene.json").string(),
+                   "--ice",
+                   clean_mesh.string(),
+                   "--water",
+                   water_mesh.string(),
+                   "--output",
+                   image.string()};
     render.inputs = {preview_data / "render_preview.py", preview_data / "preview_scene.json"};
     render.optional_inputs = {clean_mesh, water_mesh};  // frames without ice have no cleaned mesh
     render.dependencies = {cleanup.id};

@@ -31,7 +31,7 @@ struct Job {
   std::vector<std::string> args;  // argv after the program
   /// Arguments that do not change results (-j, --device, --resume) are left out of the key.
   std::vector<std::string> key_args;
-  std::vector<std::string> sections;  // scene sections (dotted names) the tool reads
+  std::vector<std::string> sections;                   // scene sections (dotted names) the tool reads
   std::vector<std::filesystem::path> inputs;           // must exist; their content is part of the key
   std::vector<std::filesystem::path> optional_inputs;  // part of the key when present (water meshes)
   std::vector<std::filesystem::path> outputs;          // must exist after success
@@ -59,9 +59,9 @@ struct BakeLayout {
 };
 
 struct GraphOptions {
-  std::filesystem::path tools_folder;  // where rime-boundary, rime-sim, ... live
+  std::filesystem::path tools_folder;                    // where rime-boundary, rime-sim, ... live
   std::int64_t first_frame = 0, last_frame = INT64_MAX;  // --frames, for per-frame stages
-  int cpu_threads = 0;                 // threads given to each per-frame tool (0: all cores)
+  int cpu_threads = 0;                                   // threads given to each per-frame tool (0: all cores)
   std::string device = "auto";
   std::optional<std::filesystem::path> blender, ffmpeg;  // preview tools, when found
   /// --memory-budget in bytes (0: not given; each tool then uses the memory available when it

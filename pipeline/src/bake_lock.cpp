@@ -40,7 +40,8 @@ bool ProcessExists(long pid) { return pid > 0 && (kill(static_cast<pid_t>(pid), 
 }  // namespace
 
 std::string LockHolder::StartTime() const {
-  if (started.size() == 20 && started[10] == 'T' && started.back() == 'Z') return started.substr(0, 10) + " " + started.substr(11, 8) + " UTC";
+  if (started.size() == 20 && started[10] == 'T' && started.back() == 'Z')
+    return started.substr(0, 10) + " " + started.substr(11, 8) + " UTC";
   return started;
 }
 
@@ -70,8 +71,9 @@ BakeLock::BakeLock(const fs::path& lock_file, const fs::path& output, bool share
   if (!taken) {
     close(fd_);
     std::string message;
-    if (shared) message = fmt::format("a local rime-bake is baking into {}{}; farm tasks cannot run beside it", output.string(),
-                                      holder ? " (" + holder->Describe() + ")" : "");
+    if (shared)
+      message = fmt::format("a local rime-bake is baking into {}{}; farm tasks cannot run beside it", output.string(),
+                            holder ? " (" + holder->Describe() + ")" : "");
     else if (holder && here && !ProcessExists(holder->pid))
       message = fmt::format("stage tools started by a killed rime-bake ({}) are still running in {}; rerun once they have exited",
                             holder->Describe(), output.string());

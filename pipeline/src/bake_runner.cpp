@@ -110,7 +110,8 @@ struct Runner::Impl {
     }
     if (!verdict.missing_inputs.empty()) {
       Fail(job, kExitStageFailed,
-           fmt::format("stage {}{} cannot run: input {} is missing", StageName(job.stage), FrameSuffix(job), verdict.missing_inputs.front()));
+           fmt::format("stage {}{} cannot run: input {} is missing", StageName(job.stage), FrameSuffix(job),
+                       verdict.missing_inputs.front()));
       return Status::kFailed;
     }
 
@@ -169,8 +170,8 @@ struct Runner::Impl {
         // machine, not the scene.
         const bool passed_on = code == static_cast<int>(ExitCode::kIo) || code == static_cast<int>(ExitCode::kOverBudget);
         Fail(job, passed_on ? code : kExitStageFailed,
-             fmt::format("stage {} failed{} ({} exited with code {}{}); log: {}", StageName(job.stage), FrameSuffix(job), job.tool_name, code,
-                         last.empty() ? "" : ": " + last, job.log.string()));
+             fmt::format("stage {} failed{} ({} exited with code {}{}); log: {}", StageName(job.stage), FrameSuffix(job), job.tool_name,
+                         code, last.empty() ? "" : ": " + last, job.log.string()));
       }
       return Status::kFailed;
     }
@@ -295,8 +296,9 @@ BakeResult Runner::Run() {
       refused.exit_code = kExitOnlyRefused;
       refused.failure = fmt::format(
           "--only {} refused: {}{}; run `rime-bake {} {}` to bring its inputs up to date, or add --force to use them as they are",
-          StageName(*options_.only), problems.front(), problems.size() > 1 ? fmt::format(" (and {} more problems)", problems.size() - 1) : "",
-          layout_.scene_file.string(), StageName(*options_.only));
+          StageName(*options_.only), problems.front(),
+          problems.size() > 1 ? fmt::format(" (and {} more problems)", problems.size() - 1) : "", layout_.scene_file.string(),
+          StageName(*options_.only));
       return refused;
     }
     for (std::size_t i = 0; i < n; ++i)
@@ -358,7 +360,9 @@ BakeResult Runner::Run() {
   int running = 0;
   bool exclusive_running = false;
   std::int64_t sim_frames_seen = 0;
-  const auto finished = [&](std::size_t i) { return impl.status[i] == Status::kDone || impl.status[i] == Status::kFailed || impl.status[i] == Status::kNotRun; };
+  const auto finished = [&](std::size_t i) {
+    return impl.status[i] == Status::kDone || impl.status[i] == Status::kFailed || impl.status[i] == Status::kNotRun;
+  };
 
   // Live display: jobs finished per stage, and the simulation's frames as they appear.
   const auto refresh_progress = [&] {
@@ -370,7 +374,8 @@ BakeResult Runner::Run() {
       const std::int64_t tasks = jobs_[i].stage == Stage::kSim ? sim_frames(i) : 1;
       if (finished(i)) done += tasks, ++stage_done[static_cast<int>(jobs_[i].stage)];
       if (impl.status[i] == Status::kRunning && jobs_[i].stage == Stage::kSim) {
-        while (sim_frames_seen < tasks && fs::exists(io::FramePath(layout_.sim(), "particles", sim_frames_seen, "h5part"))) ++sim_frames_seen;
+        while (sim_frames_seen < tasks && fs::exists(io::FramePath(layout_.sim(), "particles", sim_frames_seen, "h5part")))
+          ++sim_frames_seen;
         sim_status = fmt::format("sim frame {}/{}", std::max<std::int64_t>(0, sim_frames_seen - 1), tasks - 1);
         done += sim_frames_seen;
       }
@@ -379,8 +384,9 @@ BakeResult Runner::Run() {
     for (int s = 0; s < kStageCount; ++s) {
       if (!stage_total[s]) continue;
       if (!status.empty()) status += ", ";
-      status += s == static_cast<int>(Stage::kSim) && !sim_status.empty() ? sim_status
-                                                                            : fmt::format("{} {}/{}", StageName(Stage(s)), stage_done[s], stage_total[s]);
+      status += s == static_cast<int>(Stage::kSim) && !sim_status.empty()
+                    ? sim_status
+                    : fmt::format("{} {}/{}", StageName(Stage(s)), stage_done[s], stage_total[s]);
     }
     progress.Update(done, status);
   };

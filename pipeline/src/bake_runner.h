@@ -16,8 +16,8 @@
 namespace rime::bake {
 
 /// rime-bake's own exit codes beyond the shared ones (README.md "rime-bake").
-constexpr int kExitStageFailed = 7;    // a stage tool failed: the message names stage, frame and log
-constexpr int kExitOnlyRefused = 8;    // --only: inputs missing or stale (pass --force to run anyway)
+constexpr int kExitStageFailed = 7;  // a stage tool failed: the message names stage, frame and log
+constexpr int kExitOnlyRefused = 8;  // --only: inputs missing or stale (pass --force to run anyway)
 
 struct RunOptions {
   std::optional<Stage> only;  // --only STAGE: rerun that stage's jobs on cached inputs
@@ -33,7 +33,7 @@ struct RunOptions {
 
 struct StageSummary {
   int ran = 0, cached = 0, failed = 0, not_run = 0;
-  int empty = 0;  // of `ran`: frames with an empty input mesh, nothing to clean (tool not run)
+  int empty = 0;       // of `ran`: frames with an empty input mesh, nothing to clean (tool not run)
   double seconds = 0;  // wall time of the jobs that ran (summed over parallel jobs)
 };
 

@@ -20,7 +20,9 @@ constexpr const char* kFormat = "rime.bake-state";
 constexpr const char* kRecordFormat = "rime.bake-record";
 constexpr int kVersion = 1;
 
-json RecordJson(const JobRecord& r) { return {{"key", r.key}, {"components", r.components}, {"outputs", r.outputs}, {"seconds", r.seconds}}; }
+json RecordJson(const JobRecord& r) {
+  return {{"key", r.key}, {"components", r.components}, {"outputs", r.outputs}, {"seconds", r.seconds}};
+}
 
 JobRecord ParseRecord(const json& j) {
   JobRecord r;

@@ -66,8 +66,8 @@ class BakeState {
   std::map<std::string, FileStamp> files_;
   std::map<std::string, JobRecord> jobs_;
   bool per_job_records_ = false;
-  std::set<std::string> changed_;                     // jobs recorded since Load
-  std::vector<std::filesystem::path> merged_records_; // per-job files read by Load
+  std::set<std::string> changed_;                      // jobs recorded since Load
+  std::vector<std::filesystem::path> merged_records_;  // per-job files read by Load
 };
 
 }  // namespace rime::bake

@@ -71,15 +71,16 @@ std::string Ranges(std::vector<std::int64_t> values) {
 fs::path SlurmCommand(const std::string& name) {
   const auto path = FindOnPath(name);
   if (!path)
-    throw Refused(fmt::format("{} not found on PATH: --farm needs Slurm's client commands (sbatch, squeue, sacct, scancel) on this "
-                              "machine (Debian: apt install slurm-client)",
-                              name));
+    throw Refused(
+        fmt::format("{} not found on PATH: --farm needs Slurm's client commands (sbatch, squeue, sacct, scancel) on this "
+                    "machine (Debian: apt install slurm-client)",
+                    name));
   return *path;
 }
 
 bool FinishedState(const std::string& state) {
-  static const std::set<std::string> kFinished = {"COMPLETED", "FAILED",  "CANCELLED",    "TIMEOUT", "OUT_OF_MEMORY", "NODE_FAIL",
-                                                   "BOOT_FAIL", "DEADLINE", "PREEMPTED", "REVOKED", "SPECIAL_EXIT"};
+  static const std::set<std::string> kFinished = {"COMPLETED", "FAILED",   "CANCELLED", "TIMEOUT", "OUT_OF_MEMORY", "NODE_FAIL",
+                                                  "BOOT_FAIL", "DEADLINE", "PREEMPTED", "REVOKED", "SPECIAL_EXIT"};
   return kFinished.count(state.substr(0, state.find(' '))) > 0;
 }
 
@@ -149,8 +150,7 @@ std::map<std::string, std::string> FinishedStates(const std::vector<std::string>
   std::map<std::string, std::string> states;
   try {
     states = SqueueStates(true);
-  } catch (const Error&) {
-  }
+  } catch (const Error&) {}
   const auto sacct = FindOnPath("sacct");
   if (!sacct || job_ids.empty()) return states;
   std::string ids;
@@ -235,7 +235,7 @@ void WriteJobs(const BakeLayout& layout, const JobsRecord& record) {
   for (const auto& s : record.submissions)
     submissions.push_back({{"group", s.group}, {"job_id", s.job_id}, {"first", s.first}, {"chunk", s.chunk}, {"tasks", s.tasks}});
   const json root = {{"format", kJobsFormat}, {"version", kJobsVersion}, {"target", record.target},
-                     {"first", record.first},  {"last", record.last},       {"submissions", submissions}};
+                     {"first", record.first}, {"last", record.last},     {"submissions", submissions}};
   WriteFileAtomically(JobsFile(layout), root.dump(1) + "\n");
 }
 
@@ -285,9 +285,10 @@ void RefuseWhileFarmJobsAlive(const BakeLayout& layout) {
     return;
   }
   if (!alive.empty())
-    throw Error(ExitCode::kIo, fmt::format("Slurm jobs of this bake are queued or running ({}); a local bake now would write the same files: "
-                                           "wait for them (--farm status) or cancel them (--farm cancel)",
-                                           fmt::join(alive, ", ")),
+    throw Error(ExitCode::kIo,
+                fmt::format("Slurm jobs of this bake are queued or running ({}); a local bake now would write the same files: "
+                            "wait for them (--farm status) or cancel them (--farm cancel)",
+                            fmt::join(alive, ", ")),
                 layout.output.string());
 }
 
@@ -302,9 +303,10 @@ int FarmSubmit(const FarmContext& farm, bool resubmit, json& summary) {
   }
   const std::vector<std::string> alive = AliveJobIds(previous, queue);
   if (!resubmit && !alive.empty())
-    throw Error(ExitCode::kIo, fmt::format("Slurm jobs of this bake are still queued or running ({}): see --farm status; --farm resubmit "
-                                           "submits what failed or is missing beside them, --farm cancel stops them",
-                                           fmt::join(alive, ", ")),
+    throw Error(ExitCode::kIo,
+                fmt::format("Slurm jobs of this bake are still queued or running ({}): see --farm status; --farm resubmit "
+                            "submits what failed or is missing beside them, --farm cancel stops them",
+                            fmt::join(alive, ", ")),
                 layout.output.string());
 
   const std::vector<Job> jobs = BuildGraph(*farm.doc, layout, farm.graph, farm.target);
@@ -414,10 +416,21 @@ int FarmSubmit(const FarmContext& farm, bool resubmit, json& summary) {
     if (!dependencies.empty()) args.push_back(fmt::format("--dependency={}", fmt::join(dependencies, ",")));
 
     args.push_back(TaskScript(layout).string());
-    const std::vector<std::string> task = {farm.node_rime_bake.string(), layout.scene_file.string(), StageName(planned.stage),
-                                           "-o", layout.output.string(), "--tools", farm.node_tools.string(),
-                                           "--device", farm.graph.device, "--frames", fmt::format("{}-{}", first, last),
-                                           "--farm-task", planned.group, "--farm-chunk", std::to_string(chunk)};
+    const std::vector<std::string> task = {farm.node_rime_bake.string(),
+                                           layout.scene_file.string(),
+                                           StageName(planned.stage),
+                                           "-o",
+                                           layout.output.string(),
+                                           "--tools",
+                                           farm.node_tools.string(),
+                                           "--device",
+                                           farm.graph.device,
+                                           "--frames",
+                                           fmt::format("{}-{}", first, last),
+                                           "--farm-task",
+                                           planned.group,
+                                           "--farm-chunk",
+                                           std::to_string(chunk)};
     args.insert(args.end(), task.begin(), task.end());
     if (!sim_job.empty()) args.insert(args.end(), {"--farm-sim-job", sim_job});
     if (farm.force) args.push_back("--force");
@@ -452,7 +465,8 @@ int FarmSubmit(const FarmContext& farm, bool resubmit, json& summary) {
   summary["stale_jobs"] = stale;
   summary["submitted"] = submitted_json;
   if (stale == 0) {
-    if (!farm.dry_run) log::Info("nothing to submit: every job up to {} is up to date{}", StageName(farm.target), alive.empty() ? "" : " or still queued");
+    if (!farm.dry_run)
+      log::Info("nothing to submit: every job up to {} is up to date{}", StageName(farm.target), alive.empty() ? "" : " or still queued");
     return 0;
   }
   if (farm.dry_run) {
@@ -524,8 +538,13 @@ int FarmStatus(const FarmContext& farm, json& summary) {
                                slurm_task.empty() ? "" : (slurm_state.empty() ? ")" : ", " + slurm_state + ")"),
                                last.empty() ? "" : last + "; ", log.string());
       }
-      listed.push_back({{"id", job.id}, {"stage", StageName(job.stage)}, {"frame", job.frame}, {"state", kStateNames[state]},
-                        {"slurm_task", slurm_task}, {"slurm_state", slurm_state}, {"log", log.string()}});
+      listed.push_back({{"id", job.id},
+                        {"stage", StageName(job.stage)},
+                        {"frame", job.frame},
+                        {"state", kStateNames[state]},
+                        {"slurm_task", slurm_task},
+                        {"slurm_state", slurm_state},
+                        {"log", log.string()}});
     }
     ++counts[static_cast<int>(job.stage)][state];
     if (state == kDone || state == kFailed) continue;  // failed jobs are listed one by one below the table
@@ -550,8 +569,10 @@ int FarmStatus(const FarmContext& farm, json& summary) {
   int missing = 0;
   for (const auto& c : counts) missing += c[kMissing];
   if (failed + missing > 0)
-    std::printf("%d jobs failed and %d are missing (never ran, cancelled, or their dependency failed): `rime-bake %s --farm resubmit` submits them\n",
-                failed, missing, layout.scene_file.string().c_str());
+    std::printf(
+        "%d jobs failed and %d are missing (never ran, cancelled, or their dependency failed): `rime-bake %s --farm resubmit` submits "
+        "them\n",
+        failed, missing, layout.scene_file.string().c_str());
   if (record.submissions.empty()) std::printf("no farm submission is recorded for this bake (%s)\n", JobsFile(layout).string().c_str());
   std::fflush(stdout);
   summary["farm"] = "status";
@@ -585,8 +606,9 @@ int FarmCancel(const FarmContext& farm, json& summary) {
   const auto deadline = Clock::now() + kCancelTimeout;
   while (!AliveJobIds(record, QueueStates()).empty()) {
     if (Clock::now() > deadline)
-      throw Error(ExitCode::kIo, fmt::format("jobs {} are still leaving the queue after {} s; check again with --farm status", fmt::join(alive, ", "),
-                                             std::chrono::duration_cast<std::chrono::seconds>(kCancelTimeout).count()));
+      throw Error(ExitCode::kIo,
+                  fmt::format("jobs {} are still leaving the queue after {} s; check again with --farm status", fmt::join(alive, ", "),
+                              std::chrono::duration_cast<std::chrono::seconds>(kCancelTimeout).count()));
     std::this_thread::sleep_for(std::chrono::milliseconds(300));
   }
   log::Info("cancelled Slurm jobs {}; jobs that were running are marked incomplete and rerun with the next bake", fmt::join(alive, ", "));
@@ -617,9 +639,10 @@ int FarmTask(const FarmContext& farm, const std::string& group, int chunk, const
   for (const Job& job : jobs)
     if (job.frame >= 0 ? StageName(job.stage) == group && job.frame >= lo && job.frame <= hi : job.id == group) selected.push_back(&job);
   if (selected.empty())  // the submitting machine's graph had these jobs: this node's differs
-    throw InputError(fmt::format("farm task {}: this node's bake graph has no such job{} (the preview stage needs Blender on the nodes' PATH)",
-                                 group, lo == INT64_MIN ? std::string() : fmt::format(" in frames {}-{}", lo, hi)),
-                     layout.scene_file.string());
+    throw InputError(
+        fmt::format("farm task {}: this node's bake graph has no such job{} (the preview stage needs Blender on the nodes' PATH)", group,
+                    lo == INT64_MIN ? std::string() : fmt::format(" in frames {}-{}", lo, hi)),
+        layout.scene_file.string());
 
   const fs::path sim_marker = IncompleteMarker(layout, "sim");
   std::string sim_key;
@@ -646,16 +669,16 @@ int FarmTask(const FarmContext& farm, const std::string& group, int chunk, const
       int failed_queries = 0;
       bool announced = false;
       while (!(fs::exists(frame) && marker_key() == sim_key)) {
-        if (Interrupted()) throw Error(ExitCode::kInterrupted, fmt::format("{}: interrupted while waiting for frame {}", job->id, job->frame));
+        if (Interrupted())
+          throw Error(ExitCode::kInterrupted, fmt::format("{}: interrupted while waiting for frame {}", job->id, job->frame));
         const std::optional<bool> alive = JobAlive(sim_job);
         if (!alive && ++failed_queries > 120) throw Refused(fmt::format("cannot ask Slurm whether simulation job {} still runs", sim_job));
         if (alive == false) {
           lift_throttle_once_sim_ended(false);
           const std::string key = marker_key();
           if (fs::exists(frame) && (key.empty() || key == sim_key)) break;
-          throw Error(static_cast<ExitCode>(kExitStageFailed),
-                      fmt::format("simulation job {} ended without writing frame {} ({}); see {}", sim_job, job->frame, frame.string(),
-                                  sim->log.string()));
+          throw Error(static_cast<ExitCode>(kExitStageFailed), fmt::format("simulation job {} ended without writing frame {} ({}); see {}",
+                                                                           sim_job, job->frame, frame.string(), sim->log.string()));
         }
         if (!announced) log::Info("{}: waiting for simulation job {} to write {}", job->id, sim_job, frame.string());
         announced = true;

@@ -39,7 +39,8 @@ std::string Checked(io::TomlReader& t, const std::string& key, const std::string
 void ParsePerStage(io::TomlReader t, std::array<std::string, kStageCount>& values, const std::regex& pattern, const char* what) {
   const bool has_default = t.Has("default");
   const std::string fallback = Checked(t, "default", "", pattern, what);
-  for (int s = 0; s < kStageCount; ++s) values[s] = Checked(t, StageName(static_cast<Stage>(s)), has_default ? fallback : values[s], pattern, what);
+  for (int s = 0; s < kStageCount; ++s)
+    values[s] = Checked(t, StageName(static_cast<Stage>(s)), has_default ? fallback : values[s], pattern, what);
   t.RejectUnknownKeys();
 }
 

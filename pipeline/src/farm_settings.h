@@ -19,7 +19,7 @@ struct FarmSettings {
   std::string account, qos;
   /// Per stage, Slurm's `--time` and `--mem` values; empty: the partition's defaults.
   std::array<std::string, kStageCount> time{}, memory{};
-  int chunk = 1;              // frames per array task of the per-frame stages
+  int chunk = 1;  // frames per array task of the per-frame stages
   /// Surface tasks that may start while the simulation runs, each waiting for its frames (the
   /// rest start once the simulation has ended); 0: the surface array waits for it to succeed.
   int stream_tasks = 4;
@@ -28,8 +28,8 @@ struct FarmSettings {
   bool gpus = false;          // the simulation's partition has GPUs
   std::string gpu_gres = "gpu:1";
   std::vector<std::string> sbatch_lines;  // extra `#SBATCH` options, e.g. "--constraint=avx2"
-  std::string bin_dir;  // folder of the Rime binaries on the nodes; empty: rime-bake's own folder
-  std::vector<std::string> sources;  // files the settings came from, for messages
+  std::string bin_dir;                    // folder of the Rime binaries on the nodes; empty: rime-bake's own folder
+  std::vector<std::string> sources;       // files the settings came from, for messages
 };
 
 /// Site file first (when given), then the scene's `[farm]` table over it. Errors name

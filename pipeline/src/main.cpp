@@ -26,10 +26,9 @@ void RequireInSandbox(const Sandbox& sandbox, const io::Scene& scene, const Bake
   if (!sandbox.enabled()) return;
   for (const io::SolidObject& solid : scene.solids)
     if (solid.shape == io::SolidShape::kMesh)
-      sandbox.Require(scene.Resolve(solid.mesh), fmt::format("{}: solid '{}' mesh", scene.file.string(), solid.name),
-                      ExitCode::kBadInput);
-  for (const fs::path& folder : {layout.output, layout.cache(), layout.state_folder(), layout.logs(), layout.boundary(),
-                                 layout.sim(), layout.surface(), layout.clean(), layout.preview(), layout.cache() / "preview"})
+      sandbox.Require(scene.Resolve(solid.mesh), fmt::format("{}: solid '{}' mesh", scene.file.string(), solid.name), ExitCode::kBadInput);
+  for (const fs::path& folder : {layout.output, layout.cache(), layout.state_folder(), layout.logs(), layout.boundary(), layout.sim(),
+                                 layout.surface(), layout.clean(), layout.preview(), layout.cache() / "preview"})
     sandbox.Require(folder, "-o", ExitCode::kUsage);
   for (const char* name : {"state.json", "lock"}) sandbox.Require(layout.state_folder() / name, "-o (bake state)", ExitCode::kUsage);
 }
@@ -55,12 +54,14 @@ int main(int argc, char** argv) {
   tool::CommonOptions common;
   tool::Setup(app, "rime-bake", common, tool::kDevice | tool::kFrames | tool::kJsonSummary | tool::kMemoryBudget | tool::kSandbox);
   app.get_option("--memory-budget")
-      ->description("Passed to every stage tool, which refuses to start (exit 10, nothing written) when the peak memory it "
-                    "estimates from its inputs exceeds it; the per-frame stages each get SIZE divided by -j. SIZE: 512M, 4G, "
-                    "1.5GiB or bytes (powers of 1024). Default: each tool takes the memory available when it starts");
+      ->description(
+          "Passed to every stage tool, which refuses to start (exit 10, nothing written) when the peak memory it "
+          "estimates from its inputs exceeds it; the per-frame stages each get SIZE divided by -j. SIZE: 512M, 4G, "
+          "1.5GiB or bytes (powers of 1024). Default: each tool takes the memory available when it starts");
   app.get_option("--sandbox")
-      ->description("Refuse (nothing written) when the scene, a mesh path in the scene, the output folder, the cache or any "
-                    "file a job reads or writes does not resolve inside DIR after following symlinks; passed to every stage tool");
+      ->description(
+          "Refuse (nothing written) when the scene, a mesh path in the scene, the output folder, the cache or any "
+          "file a job reads or writes does not resolve inside DIR after following symlinks; passed to every stage tool");
   std::string scene_file, target_name = "all", only_name, output, tools_folder;
   int parallel_frames = 1;
   bool force = false, dry_run = false, explain = false, clean = false;
@@ -77,15 +78,17 @@ int main(int argc, char** argv) {
   app.add_flag("--explain", explain, "Say why each job is stale (with --dry-run: also which are up to date)");
   app.add_flag("--clean", clean, "Delete everything this bake produced for the scene (output stages and cache), then stop");
   app.add_option("-o,--output", output, "Output folder (default: out/<scene name>); the cache lives in <output>/cache");
-  app.add_option("--tools", tools_folder, "Folder holding rime-boundary, rime-sim, rime-surface, rime-clean (default: rime-bake's own folder)");
+  app.add_option("--tools", tools_folder,
+                 "Folder holding rime-boundary, rime-sim, rime-surface, rime-clean (default: rime-bake's own folder)");
   std::string farm, farm_config, farm_task, farm_sim_job;
   int farm_chunk = 1;
   app.add_option("--farm", farm,
                  "Bake on a Slurm cluster (docs/farm.md): slurm submits the stale jobs and exits; status shows each stage and frame; "
                  "resubmit submits what failed or is missing; cancel cancels this bake's jobs")
       ->check(CLI::IsMember({"slurm", "status", "resubmit", "cancel"}));
-  app.add_option("--farm-config", farm_config, "Site settings for --farm: a TOML file with a [farm] table (default: $RIME_FARM_CONFIG); "
-                                               "the scene's own [farm] table overrides it");
+  app.add_option("--farm-config", farm_config,
+                 "Site settings for --farm: a TOML file with a [farm] table (default: $RIME_FARM_CONFIG); "
+                 "the scene's own [farm] table overrides it");
   // What a farm task runs on a node (written by --farm slurm, not typed by users).
   app.add_option("--farm-task", farm_task)->group("");
   app.add_option("--farm-chunk", farm_chunk)->group("")->check(CLI::PositiveNumber);
@@ -110,11 +113,13 @@ int main(int argc, char** argv) {
       }
     }
     const auto target = ParseStage(target_name == "all" ? "preview" : target_name);
-    if (!target) throw Error(ExitCode::kUsage, fmt::format("unknown target '{}' (boundary, sim, surface, clean, preview, all)", target_name));
+    if (!target)
+      throw Error(ExitCode::kUsage, fmt::format("unknown target '{}' (boundary, sim, surface, clean, preview, all)", target_name));
     std::optional<Stage> only;
     if (!only_name.empty()) {
       only = ParseStage(only_name);
-      if (!only) throw Error(ExitCode::kUsage, fmt::format("unknown stage '{}' for --only (boundary, sim, surface, clean, preview)", only_name));
+      if (!only)
+        throw Error(ExitCode::kUsage, fmt::format("unknown stage '{}' for --only (boundary, sim, surface, clean, preview)", only_name));
     }
 
     const Sandbox sandbox = tool::MakeSandbox(common);
@@ -160,7 +165,8 @@ int main(int argc, char** argv) {
     const char* chosen_blender = std::getenv("RIME_BLENDER");
     const bool blender_off = chosen_blender && std::string(chosen_blender) == "none";
     if (chosen_blender && *chosen_blender && !blender_off) {
-      if (!fs::exists(chosen_blender)) throw Error(ExitCode::kBadInput, fmt::format("RIME_BLENDER names {}, which does not exist", chosen_blender));
+      if (!fs::exists(chosen_blender))
+        throw Error(ExitCode::kBadInput, fmt::format("RIME_BLENDER names {}, which does not exist", chosen_blender));
       graph.blender = fs::path(chosen_blender);
     } else if (!blender_off) {
       graph.blender = FindOnPath("blender");
@@ -168,10 +174,10 @@ int main(int argc, char** argv) {
     graph.ffmpeg = FindOnPath("ffmpeg");
     const Stage last_stage = only ? *only : *target;
     const bool preview_skipped = last_stage == Stage::kPreview && !graph.blender;
-    if (preview_skipped && blender_off)
-      log::Debug("preview stage skipped: RIME_BLENDER=none");
+    if (preview_skipped && blender_off) log::Debug("preview stage skipped: RIME_BLENDER=none");
     else if (preview_skipped)
-      log::Info("preview stage skipped: blender is not on PATH (install Blender 3.4 or newer to get PNG frames, a contact sheet and an MP4)");
+      log::Info(
+          "preview stage skipped: blender is not on PATH (install Blender 3.4 or newer to get PNG frames, a contact sheet and an MP4)");
     else if (last_stage == Stage::kPreview && !graph.ffmpeg)
       log::Info("ffmpeg is not on PATH: the preview stage renders PNG frames only (no contact sheet, no MP4)");
     if (only == Stage::kPreview && !graph.blender) return 0;
@@ -229,13 +235,13 @@ int main(int argc, char** argv) {
     Runner runner(doc, layout, std::move(jobs), run);
     const BakeResult result = runner.Run();
 
-    nlohmann::json summary = {{"scene", scene_file},         {"output", layout.output.string()}, {"exit_code", result.exit_code},
-                              {"seconds", result.seconds},  {"dry_run", dry_run},                {"failure", result.failure},
-                              {"preview_skipped", preview_skipped}};
+    nlohmann::json summary = {
+        {"scene", scene_file}, {"output", layout.output.string()}, {"exit_code", result.exit_code},     {"seconds", result.seconds},
+        {"dry_run", dry_run},  {"failure", result.failure},        {"preview_skipped", preview_skipped}};
     for (int s = 0; s < kStageCount; ++s) {
       const StageSummary& st = result.stages[s];
-      summary["stages"][StageName(static_cast<Stage>(s))] = {
-          {"ran", st.ran}, {"empty", st.empty}, {"cached", st.cached}, {"failed", st.failed}, {"not_run", st.not_run}, {"seconds", st.seconds}};
+      summary["stages"][StageName(static_cast<Stage>(s))] = {{"ran", st.ran},       {"empty", st.empty},     {"cached", st.cached},
+                                                             {"failed", st.failed}, {"not_run", st.not_run}, {"seconds", st.seconds}};
     }
     tool::WriteSummary(common, summary);
     int jobs_seen = 0;  // none when the bake was refused before running anything (--only, the lock)

@@ -118,8 +118,7 @@ int RunProcess(const fs::path& program, const std::vector<std::string>& args, co
   const int slot = RegisterChild(pid);
   if (Interrupted()) kill(-pid, SIGTERM);
   int status = 0;
-  while (waitpid(pid, &status, 0) < 0 && errno == EINTR) {
-  }
+  while (waitpid(pid, &status, 0) < 0 && errno == EINTR) {}
   if (slot >= 0) g_children[slot] = 0;
   if (WIFEXITED(status)) return WEXITSTATUS(status);
   if (WIFSIGNALED(status)) return 128 + WTERMSIG(status);
@@ -133,7 +132,8 @@ Captured CaptureProcess(const fs::path& program, const std::vector<std::string>&
   for (auto& s : storage) argv.push_back(s.data());
   argv.push_back(nullptr);
   int out_pipe[2], err_pipe[2];
-  if (pipe2(out_pipe, O_CLOEXEC) != 0) throw Error(ExitCode::kFailure, fmt::format("cannot start {}: {}", program.string(), std::strerror(errno)));
+  if (pipe2(out_pipe, O_CLOEXEC) != 0)
+    throw Error(ExitCode::kFailure, fmt::format("cannot start {}: {}", program.string(), std::strerror(errno)));
   if (pipe2(err_pipe, O_CLOEXEC) != 0) {
     close(out_pipe[0]), close(out_pipe[1]);
     throw Error(ExitCode::kFailure, fmt::format("cannot start {}: {}", program.string(), std::strerror(errno)));
@@ -176,8 +176,7 @@ Captured CaptureProcess(const fs::path& program, const std::vector<std::string>&
     }
   }
   int status = 0;
-  while (waitpid(pid, &status, 0) < 0 && errno == EINTR) {
-  }
+  while (waitpid(pid, &status, 0) < 0 && errno == EINTR) {}
   result.code = WIFEXITED(status) ? WEXITSTATUS(status) : WIFSIGNALED(status) ? 128 + WTERMSIG(status) : 1;
   return result;
 }

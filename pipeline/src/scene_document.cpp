@@ -51,7 +51,8 @@ SceneDocument SceneDocument::Load(const std::filesystem::path& file) {
     doc.sections_.push_back(name);
     doc.canonical_.emplace_back(name, Canonical(node));
     if (const auto* table = node.as_table())
-      for (const auto& [sub_key, sub_node] : *table) doc.canonical_.emplace_back(name + "." + std::string(sub_key.str()), Canonical(sub_node));
+      for (const auto& [sub_key, sub_node] : *table)
+        doc.canonical_.emplace_back(name + "." + std::string(sub_key.str()), Canonical(sub_node));
   }
   io::TomlReader top(root, file.string(), "");
   doc.bake_ = ParseBakeTable(top.Table("bake"));

@@ -448,15 +448,16 @@ pid_t DeadPid() {
 
 TEST_F(Bake, SecondBakeIntoTheSameFolderIsRefusedNamingTheHolder) {
   setenv("FAKE_SIM_SLEEP", "0.5", 1);
-  const pid_t first = rime::test::Spawn({RIME_BINARY_DIR "/bin/rime-bake", scene_.string(), "--tools", (root_ / "tools").string(), "-o",
-                                         Out().string(), "-q"},
-                                        root_ / "first.txt");
+  const pid_t first = rime::test::Spawn(
+      {RIME_BINARY_DIR "/bin/rime-bake", scene_.string(), "--tools", (root_ / "tools").string(), "-o", Out().string(), "-q"},
+      root_ / "first.txt");
   ASSERT_GT(first, 0);
-  for (int k = 0; k < 200 && !fs::exists(Out() / "cache/sim/particles.0000.h5part"); ++k) std::this_thread::sleep_for(std::chrono::milliseconds(25));
+  for (int k = 0; k < 200 && !fs::exists(Out() / "cache/sim/particles.0000.h5part"); ++k)
+    std::this_thread::sleep_for(std::chrono::milliseconds(25));
   EXPECT_EQ(RunBake(), 5) << output_;
   // One line: who holds the lock (pid, host, start time) and which lock it is.
-  EXPECT_NE(output_.find(fmt::format("rime-bake: error: another rime-bake is baking into {} (pid {} on host {}, started ", Out().string(), first,
-                                     HostName())),
+  EXPECT_NE(output_.find(fmt::format("rime-bake: error: another rime-bake is baking into {} (pid {} on host {}, started ", Out().string(),
+                                     first, HostName())),
             std::string::npos)
       << output_;
   EXPECT_NE(output_.find("UTC) (" + (Out() / "cache/.rime-bake/lock").string() + ")"), std::string::npos) << output_;
@@ -477,7 +478,8 @@ TEST_F(Bake, StaleLockOfADeadBakeIsReportedAndRecovered) {
   fs::create_directories(Out() / "surface");
   WriteFile(Out() / "surface/ice.0001.obj.tmp.999999.0", "half a mesh");
   ASSERT_EQ(RunBake(), 0) << output_;
-  EXPECT_NE(output_.find(fmt::format("stale lock from pid {} ({}, started 2026-01-02 03:04:05 UTC) recovered", dead, HostName())), std::string::npos)
+  EXPECT_NE(output_.find(fmt::format("stale lock from pid {} ({}, started 2026-01-02 03:04:05 UTC) recovered", dead, HostName())),
+            std::string::npos)
       << output_;
   EXPECT_FALSE(fs::exists(Out() / "surface/ice.0001.obj.tmp.999999.0")) << output_;
   EXPECT_NE(output_.find("removed 1 temporary files left by an interrupted run"), std::string::npos) << output_;
@@ -491,9 +493,11 @@ TEST_F(Bake, LockNamingAnotherHostIsRefusedNotTakenOver) {
   fs::create_directories(Out() / "cache/.rime-bake");
   WriteFile(Out() / "cache/.rime-bake/lock", "pid=4242 host=render-node-17 started=2026-01-02T03:04:05Z\n");
   EXPECT_EQ(RunBake(), 5) << output_;
-  EXPECT_NE(output_.find("the bake lock names pid 4242 on host render-node-17, started 2026-01-02 03:04:05 UTC, which cannot be checked from "
-                         "host " + HostName() + "; if no rime-bake runs there any more, delete the lock file and rerun"),
-            std::string::npos)
+  EXPECT_NE(
+      output_.find("the bake lock names pid 4242 on host render-node-17, started 2026-01-02 03:04:05 UTC, which cannot be checked from "
+                   "host " +
+                   HostName() + "; if no rime-bake runs there any more, delete the lock file and rerun"),
+      std::string::npos)
       << output_;
   EXPECT_TRUE(Invocations().empty());
 }
@@ -502,9 +506,9 @@ TEST_F(Bake, LockNamingAnotherHostIsRefusedNotTakenOver) {
 // last of its tools has exited, so a rerun cannot race a tool that is still writing.
 TEST_F(Bake, ToolsOfAKilledBakeHoldTheLockUntilTheyExit) {
   setenv("FAKE_SIM_SLEEP", "3", 1);  // the fake simulation's `sleep 3` outlives the killed bake
-  const pid_t bake = rime::test::Spawn({RIME_BINARY_DIR "/bin/rime-bake", scene_.string(), "--tools", (root_ / "tools").string(), "-o",
-                                        Out().string(), "-q"},
-                                       root_ / "killed.txt");
+  const pid_t bake = rime::test::Spawn(
+      {RIME_BINARY_DIR "/bin/rime-bake", scene_.string(), "--tools", (root_ / "tools").string(), "-o", Out().string(), "-q"},
+      root_ / "killed.txt");
   ASSERT_GT(bake, 0);
   for (int k = 0; k < 200 && ReadFile(root_ / "invocations.log").find("rime-sim") == std::string::npos; ++k)
     std::this_thread::sleep_for(std::chrono::milliseconds(25));
@@ -526,10 +530,11 @@ TEST_F(Bake, StageToolThatCannotWriteMakesTheBakeExit5NamingTheFile) {
   EXPECT_EQ(RunBake(), 5) << output_;
   unsetenv("FAKE_FAIL");
   unsetenv("FAKE_FAIL_CODE");
-  EXPECT_NE(output_.find(fmt::format("rime-bake: error: stage surface failed on frame 2 (rime-surface exited with code 5: rime-surface: error: "
-                                     "cannot write VDB file: No space left on device ({}/ice.0002.vdb)); log: ",
-                                     (Out() / "surface").string())),
-            std::string::npos)
+  EXPECT_NE(
+      output_.find(fmt::format("rime-bake: error: stage surface failed on frame 2 (rime-surface exited with code 5: rime-surface: error: "
+                               "cannot write VDB file: No space left on device ({}/ice.0002.vdb)); log: ",
+                               (Out() / "surface").string())),
+      std::string::npos)
       << output_;
   EXPECT_EQ(RunBake(), 0) << output_;
 }
@@ -540,7 +545,8 @@ TEST_F(Bake, MemoryBudgetReachesEveryToolAsItsShareAndChangesNoKey) {
   for (const std::string& line : InvocationLines()) {
     const std::string tool = line.substr(0, line.find(' '));
     // Boundary and simulation run alone with the whole budget; two frames at once share it.
-    const std::string expected = tool == "rime-boundary" || tool == "rime-sim" ? "--memory-budget 4294967296" : "--memory-budget 2147483648";
+    const std::string expected =
+        tool == "rime-boundary" || tool == "rime-sim" ? "--memory-budget 4294967296" : "--memory-budget 2147483648";
     EXPECT_NE(line.find(expected), std::string::npos) << line;
     surfaces += tool == "rime-surface", cleanups += tool == "rime-clean";
   }
@@ -585,7 +591,8 @@ TEST_F(Bake, SandboxRefusesPathsOutsideItBeforeWritingAnything) {
   // Scene mesh paths: a "../" escape, an absolute path, a symlink that leads out.
   fs::create_directory_symlink(outside, root_ / "linked");
   const std::string mesh_field = scene_.string() + ": solid 'rock' mesh ";
-  for (const std::string& mesh : {"../" + outside.filename().string() + "/rock.obj", (outside / "rock.obj").string(), std::string("linked/rock.obj")}) {
+  for (const std::string& mesh :
+       {"../" + outside.filename().string() + "/rock.obj", (outside / "rock.obj").string(), std::string("linked/rock.obj")}) {
     SCOPED_TRACE(mesh);
     WriteFile(scene_, std::string(kScene) + "\n[[solid]]\nname = \"rock\"\nshape = \"mesh\"\nmesh = \"" + mesh + "\"\n");
     expect_refused(3, mesh_field + (scene_.parent_path() / mesh).string());
@@ -598,8 +605,8 @@ TEST_F(Bake, SandboxRefusesPathsOutsideItBeforeWritingAnything) {
   fs::remove(Out() / "cache");
   // The output folder given with "../".
   const std::string escape = std::string("'") + RIME_BINARY_DIR "/bin/rime-bake' '" + scene_.string() + "' --tools '" +
-                             (root_ / "tools").string() + "' -o '" + root_.string() + "/../" + outside.filename().string() +
-                             "/out' " + sandbox + " > /dev/null 2>&1";
+                             (root_ / "tools").string() + "' -o '" + root_.string() + "/../" + outside.filename().string() + "/out' " +
+                             sandbox + " > /dev/null 2>&1";
   const int status = std::system(escape.c_str());
   EXPECT_EQ(WIFEXITED(status) ? WEXITSTATUS(status) : -1, 2);
   EXPECT_FALSE(fs::exists(outside / "out"));
@@ -617,8 +624,9 @@ TEST_F(Bake, OutputFolderFullOfShellSyntaxReachesNoShell) {
   const std::string marker = (root_ / "pwned").string();
   const fs::path out = root_ / fmt::format("out 'q'; touch {0}1; '\"$(touch {0}2)`touch {0}3` %d\n❄ é", marker);
   std::string output;
-  const int code = rime::test::Run({RIME_BINARY_DIR "/bin/rime-bake", scene_.string(), "--tools", (root_ / "tools").string(), "-o", out.string()},
-                                   root_ / "hostile.txt", output);
+  const int code =
+      rime::test::Run({RIME_BINARY_DIR "/bin/rime-bake", scene_.string(), "--tools", (root_ / "tools").string(), "-o", out.string()},
+                      root_ / "hostile.txt", output);
   ASSERT_EQ(code, 0) << output;
   for (int k = 1; k <= 3; ++k) EXPECT_FALSE(fs::exists(fmt::format("{}{}", marker, k))) << "an injected command ran";
   EXPECT_TRUE(fs::exists(out / "preview/contact_sheet.png")) << output;
@@ -636,7 +644,8 @@ TEST_F(Bake, FarmTaskScriptPassesArgumentsThroughUnchanged) {
   WriteFile(root_ / "print_args", "#!/bin/sh\nfor a; do printf '%s\\0' \"$a\"; done\n");
   chmod((root_ / "print_args").c_str(), 0755);
   const std::string marker = (root_ / "pwned").string();
-  const std::vector<std::string> hostile = {"a;b", fmt::format("$(touch {})", marker), fmt::format("`touch {}`", marker), "'\"\\", "x\ny ❄", "*"};
+  const std::vector<std::string> hostile = {"a;b", fmt::format("$(touch {})", marker), fmt::format("`touch {}`", marker), "'\"\\", "x\ny ❄",
+                                            "*"};
   std::vector<std::string> args = {"/bin/sh", (root_ / "task.sh").string(), (root_ / "print_args").string()};
   args.insert(args.end(), hostile.begin(), hostile.end());
   std::string printed;

@@ -48,8 +48,9 @@ class BakeEndToEnd : public ::testing::Test {
   }
 
   static std::vector<std::string> Args(const fs::path& out, const std::string& extra_flags) {
-    std::vector<std::string> args = {RIME_BINARY_DIR "/bin/rime-bake", (root_ / "e2e.toml").string(), "-o", out.string(), "-j", "2",
-                                     "--json-summary", (root_ / "summary.json").string()};
+    std::vector<std::string> args = {
+        RIME_BINARY_DIR "/bin/rime-bake", (root_ / "e2e.toml").string(), "-o", out.string(), "-j", "2", "--json-summary",
+        (root_ / "summary.json").string()};
     std::istringstream extra(extra_flags);
     for (std::string word; extra >> word;) args.push_back(word);
     return args;
@@ -140,7 +141,8 @@ TEST_F(BakeEndToEnd, KilledDuringSimulationResumesToTheSameFrames) {
     const auto b = io::ReadParticleFrame(io::FramePath(out / "cache/sim", "particles", f, "h5part"));
     EXPECT_EQ(a.size(), b.size()) << "frame " << f;
     EXPECT_TRUE(a.attributes == b.attributes) << "frame " << f << " differs after resuming";
-    EXPECT_EQ(ReadFile(io::FramePath(Baked() / "clean", "water_clean", f, "obj")), ReadFile(io::FramePath(out / "clean", "water_clean", f, "obj")))
+    EXPECT_EQ(ReadFile(io::FramePath(Baked() / "clean", "water_clean", f, "obj")),
+              ReadFile(io::FramePath(out / "clean", "water_clean", f, "obj")))
         << "frame " << f;
   }
 }

@@ -51,8 +51,9 @@ class FullDisk : public ::testing::Test {
     const fs::path tools = root_ / "limited_tools";
     fs::create_directories(tools);
     for (const auto& [stage, tool] : kStages) {
-      std::ofstream(tools / tool) << fmt::format("#!/bin/bash\nlimit=${{RIME_TEST_FSIZE_{}:-unlimited}}\nulimit -f \"$limit\" || exit 1\nexec \"{}/bin/{}\" \"$@\"\n",
-                                                 stage, RIME_BINARY_DIR, tool);
+      std::ofstream(tools / tool) << fmt::format(
+          "#!/bin/bash\nlimit=${{RIME_TEST_FSIZE_{}:-unlimited}}\nulimit -f \"$limit\" || exit 1\nexec \"{}/bin/{}\" \"$@\"\n", stage,
+          RIME_BINARY_DIR, tool);
       fs::permissions(tools / tool, fs::perms::owner_all | fs::perms::group_read | fs::perms::group_exec);
     }
     return tools;
@@ -112,7 +113,8 @@ TEST_F(FullDisk, TooSmallFilesystemFailsCleanlyAndTheBakeFinishesOnceThereIsRoom
   const fs::path mount_point = root_ / "small";
   fs::create_directories(mount_point);
   if (mount("tmpfs", mount_point.c_str(), "tmpfs", 0, "size=64k") != 0)
-    GTEST_SKIP() << "cannot mount a tmpfs here (" << std::strerror(errno) << "; needs root or CAP_SYS_ADMIN): the file size limit test covers "
+    GTEST_SKIP() << "cannot mount a tmpfs here (" << std::strerror(errno)
+                 << "; needs root or CAP_SYS_ADMIN): the file size limit test covers "
                  << "each stage's write failures";
   struct Unmount {
     fs::path at;

@@ -75,8 +75,8 @@ TEST_F(HostileNames, BakeWorksUnderTheLiteralNamesAndRunsNothingInjected) {
     EXPECT_GT(fs::file_size(io::FramePath(out / "clean", "water_clean", f, "obj")), 0u) << f;
   }
   // A dry run prints every command shell-quoted: pasted into a shell they run nothing else.
-  ASSERT_EQ(test::Run({RIME_BINARY_DIR "/bin/rime-bake", scene.string(), "clean", "-o", (root_ / "dry").string(), "-n", "-q"}, root_ / "dry.txt",
-                      output),
+  ASSERT_EQ(test::Run({RIME_BINARY_DIR "/bin/rime-bake", scene.string(), "clean", "-o", (root_ / "dry").string(), "-n", "-q"},
+                      root_ / "dry.txt", output),
             0)
       << output;
   // Each printed command (-q: nothing else is printed), its program replaced by a function that
@@ -101,8 +101,9 @@ TEST_F(HostileNames, BakeWorksUnderTheLiteralNamesAndRunsNothingInjected) {
 }
 
 TEST_F(HostileNames, NamesThatLeaveTheirFolderAreRefused) {
-  const std::pair<std::string, std::string> cases[] = {
-      {TomlString("../../escaped"), TomlString("ball")}, {TomlString("fine"), TomlString("../../escaped")}, {TomlString("fine"), TomlString("")}};
+  const std::pair<std::string, std::string> cases[] = {{TomlString("../../escaped"), TomlString("ball")},
+                                                       {TomlString("fine"), TomlString("../../escaped")},
+                                                       {TomlString("fine"), TomlString("")}};
   for (const auto& [scene_name, ball_name] : cases) {
     const fs::path scene = root_ / "refused.toml";
     std::ofstream(scene) << SceneNamed(scene_name, ball_name, 1);

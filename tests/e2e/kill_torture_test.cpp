@@ -183,8 +183,12 @@ TEST_F(KillTorture, SurvivesKillsAtSeededMomentsWithIdenticalOutputs) {
     if (fs::exists(sim_log) && !frames_before.empty()) {
       const std::string log = test::ReadFile(sim_log);
       if (log.substr(0, log.find('\n')).find("--resume") != std::string::npos) ++resumes;
-      else ADD_FAILURE() << "attempt " << k << " restarted the simulation instead of resuming after frame " << frames_before.size() - 1 << ":\n" << log;
-      for (const auto& [name, inode] : frames_before) EXPECT_EQ(Inode(out / name), inode) << name << " was rewritten: the simulation restarted";
+      else
+        ADD_FAILURE() << "attempt " << k << " restarted the simulation instead of resuming after frame " << frames_before.size() - 1
+                      << ":\n"
+                      << log;
+      for (const auto& [name, inode] : frames_before)
+        EXPECT_EQ(Inode(out / name), inode) << name << " was rewritten: the simulation restarted";
     }
     if (HasFailure()) break;
   }

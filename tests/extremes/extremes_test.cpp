@@ -19,7 +19,6 @@
 #include "rime/sph/simulation.h"
 #include "rime/test/sph_scenes.h"
 
-
 namespace rime {
 namespace {
 
@@ -31,7 +30,7 @@ struct RunSummary {
   double max_average_error = 0;  // relative, worst step
   double max_error = 0;          // relative, worst particle of the worst step
   double max_speed = 0;
-  std::optional<Error> error;    // the refusal or divergence that stopped the run
+  std::optional<Error> error;  // the refusal or divergence that stopped the run
 };
 
 // Steps with the scene's Δt rule until t_end (or until the solver throws), calling observe(sim) after
@@ -61,8 +60,9 @@ RunSummary Advance(sph::Simulation<T>& sim, double t_end) {
 
 std::string Describe(const RunSummary& s) {
   char line[256];
-  std::snprintf(line, sizeof line, "%d steps (%d unconverged), density error: worst step average %.3g%%, worst particle %.3g%%, max speed %.3g m/s",
-                s.steps, s.unconverged, 100 * s.max_average_error, 100 * s.max_error, s.max_speed);
+  std::snprintf(line, sizeof line,
+                "%d steps (%d unconverged), density error: worst step average %.3g%%, worst particle %.3g%%, max speed %.3g m/s", s.steps,
+                s.unconverged, 100 * s.max_average_error, 100 * s.max_error, s.max_speed);
   return line;
 }
 
@@ -125,9 +125,9 @@ io::Scene PlateScene(double speed) {
 struct PlateRun {
   RunSummary s;
   std::int64_t initial = 0;
-  int through = 0;          // particle-steps found below the plate's top inside its footprint
-  double min_z = 1e30;      // lowest particle over the footprint, m
-  double mean_vz_end = 0;   // m/s
+  int through = 0;         // particle-steps found below the plate's top inside its footprint
+  double min_z = 1e30;     // lowest particle over the footprint, m
+  double mean_vz_end = 0;  // m/s
   double energy_start = 0, energy_end = 0;
   bool finite = true;
 };
@@ -160,10 +160,10 @@ class ExtremesPlateImpact : public ::testing::TestWithParam<double> {};
 TEST_P(ExtremesPlateImpact, CflStepStopsTheWaterOnTheNearSide) {
   const double speed = GetParam();
   const PlateRun r = RunPlate(PlateScene(speed), speed);
-  std::printf("impact %g m/s: %s; lowest particle over the plate %.3g d_p above its top, %d particle-steps through it, "
-              "mean vz at the end %.3g m/s, energy %.4g -> %.4g J/kg\n",
-              speed, Describe(r.s).c_str(), (r.min_z - kPlateThickness / 2) / kPlateDp, r.through, r.mean_vz_end, r.energy_start,
-              r.energy_end);
+  std::printf(
+      "impact %g m/s: %s; lowest particle over the plate %.3g d_p above its top, %d particle-steps through it, "
+      "mean vz at the end %.3g m/s, energy %.4g -> %.4g J/kg\n",
+      speed, Describe(r.s).c_str(), (r.min_z - kPlateThickness / 2) / kPlateDp, r.through, r.mean_vz_end, r.energy_start, r.energy_end);
   ExpectStable(r.s, r.finite);
   EXPECT_EQ(r.through, 0) << "particles tunnelled into or through the plate";
   // The run is not vacuous: the water reached the plate (within a spacing of it) and was stopped.
@@ -288,7 +288,7 @@ struct Dam {
 
 struct DamRun {
   RunSummary s;
-  int outside = 0;  // particle-steps beyond a wall
+  int outside = 0;                                              // particle-steps beyond a wall
   double energy_start = 0, energy_end = 0, centroid_shift = 0;  // shift in x, m
   bool finite = true;
 };
@@ -342,8 +342,9 @@ TEST_P(ExtremesSpacing, DamBreakIsStable) {
   EXPECT_GT(r.centroid_shift, 2 * dam.dp) << "the column collapsed towards the empty half";
 }
 
-INSTANTIATE_TEST_SUITE_P(Spacings, ExtremesSpacing, ::testing::Values(0.0005, 0.1),
-                         [](const auto& info) { return info.param < 0.01 ? std::string("HalfMillimetre") : std::string("TenCentimetres"); });
+INSTANTIATE_TEST_SUITE_P(Spacings, ExtremesSpacing, ::testing::Values(0.0005, 0.1), [](const auto& info) {
+  return info.param < 0.01 ? std::string("HalfMillimetre") : std::string("TenCentimetres");
+});
 
 TEST(ExtremesSpacing, HalfMillimetreWithSurfaceTensionIsStableOrRefusedNamingIt) {
   const Dam dam{0.0005};
@@ -597,9 +598,7 @@ struct InsideCube {
     cube.transform.translate = {0, 0, 0.5};
     scene.solids.push_back(cube);
   }
-  bool Inside(const Vec3f& p) const {
-    return std::fabs(p.x) < size / 2 && std::fabs(p.y) < size / 2 && std::fabs(p.z - 0.5) < size / 2;
-  }
+  bool Inside(const Vec3f& p) const { return std::fabs(p.x) < size / 2 && std::fabs(p.y) < size / 2 && std::fabs(p.z - 0.5) < size / 2; }
   void AddFillingBlock() {
     io::FluidBlock b;
     b.min = {-size / 2, -size / 2, 0.5 - size / 2};
@@ -641,7 +640,8 @@ TEST(ExtremesInsideSolid, BlockFillingALargeSolidIsRemovedOrRefused) {
   }
   int inside = 0;
   for (const auto& p : sim->Positions()) inside += cube.Inside(p);
-  std::printf("block filling a 30 cm cube: %lld water particles kept, %d of them inside the solid\n", (long long)sim->fluid_count(), inside);
+  std::printf("block filling a 30 cm cube: %lld water particles kept, %d of them inside the solid\n", (long long)sim->fluid_count(),
+              inside);
   EXPECT_EQ(inside, 0);
 }
 

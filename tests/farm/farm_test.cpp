@@ -53,7 +53,8 @@ class Farm : public ::testing::Test {
   static fs::path ClusterFolder() { return fs::temp_directory_path() / fmt::format("rime_farm_slurm_{}", getpid()); }
 
   void SetUp() override {
-    root_ = fs::temp_directory_path() / fmt::format("rime_farm_{}_{}", ::testing::UnitTest::GetInstance()->current_test_info()->name(), getpid());
+    root_ = fs::temp_directory_path() /
+            fmt::format("rime_farm_{}_{}", ::testing::UnitTest::GetInstance()->current_test_info()->name(), getpid());
     fs::remove_all(root_);
     fs::create_directories(root_);
     test::WriteFakeTools(root_ / "tools");
@@ -95,8 +96,8 @@ class Farm : public ::testing::Test {
   /// Runs rime-bake with `args` (a scene under root_ named by `scene`); returns its exit code,
   /// stdout+stderr in output_ and the JSON summary in summary_.
   int RunBake(const std::string& scene, const fs::path& out, const std::string& args, bool fake_tools) {
-    std::string command = fmt::format("'{}' '{}' -o '{}' --json-summary '{}' {}", RIME_BINARY_DIR "/bin/rime-bake", (root_ / scene).string(),
-                                      out.string(), (root_ / "summary.json").string(), args);
+    std::string command = fmt::format("'{}' '{}' -o '{}' --json-summary '{}' {}", RIME_BINARY_DIR "/bin/rime-bake",
+                                      (root_ / scene).string(), out.string(), (root_ / "summary.json").string(), args);
     if (fake_tools) command += fmt::format(" --tools '{}'", (root_ / "tools").string());
     fs::remove(root_ / "summary.json");
     const int status = std::system((command + " > '" + (root_ / "bake.txt").string() + "' 2>&1").c_str());
@@ -187,11 +188,13 @@ TEST_F(Farm, HostileNamesReachSbatchAsLiteralArguments) {
 // Settings errors name file, line and key; the dry run shows the sbatch commands (arrays chained
 // per frame, the surface array streaming the simulation's frames) without any cluster.
 TEST_F(Farm, DryRunShowsTheJobChainAndSettingsAreValidated) {
-  ASSERT_EQ(RunBake("fake.toml", root_ / "out", "clean --farm slurm --dry-run --explain --farm-config " + (root_ / "site.toml").string(), true), 0)
+  ASSERT_EQ(
+      RunBake("fake.toml", root_ / "out", "clean --farm slurm --dry-run --explain --farm-config " + (root_ / "site.toml").string(), true),
+      0)
       << output_;
   EXPECT_NE(output_.find("# surface.0003: "), std::string::npos) << output_;
   EXPECT_NE(output_.find("--array=0-1%1"), std::string::npos) << output_;  // 4 frames, 2 per task; 1 may wait for frames
-  EXPECT_NE(output_.find("--array=0-1 "), std::string::npos) << output_;    // cleanup: no throttle
+  EXPECT_NE(output_.find("--array=0-1 "), std::string::npos) << output_;   // cleanup: no throttle
   EXPECT_NE(output_.find("'--dependency=afterok:<boundary job>'"), std::string::npos) << output_;
   EXPECT_NE(output_.find("'--dependency=after:<sim job>'"), std::string::npos) << output_;
   EXPECT_NE(output_.find("'--dependency=aftercorr:<surface job>'"), std::string::npos) << output_;
@@ -201,7 +204,8 @@ TEST_F(Farm, DryRunShowsTheJobChainAndSettingsAreValidated) {
   EXPECT_EQ(output_.find("--memory-budget"), std::string::npos) << output_;
 
   // A memory budget and a sandbox given at submission reach every task's command line.
-  ASSERT_EQ(RunBake("fake.toml", root_ / "out", "clean --farm slurm --dry-run --memory-budget 2G --sandbox '" + root_.string() + "'", true), 0)
+  ASSERT_EQ(RunBake("fake.toml", root_ / "out", "clean --farm slurm --dry-run --memory-budget 2G --sandbox '" + root_.string() + "'", true),
+            0)
       << output_;
   for (const char* group : {"boundary", "sim", "surface", "clean"}) {
     const auto at = output_.find(fmt::format("--farm-task {} ", group));
@@ -228,7 +232,8 @@ TEST_F(Farm, DryRunShowsTheJobChainAndSettingsAreValidated) {
 
   // The scene's [farm] keys override the site file's.
   std::ofstream(root_ / "own_chunk.toml") << kFakeScene << "\n[farm]\nchunk = 1\n";
-  ASSERT_EQ(RunBake("own_chunk.toml", root_ / "out", "clean --farm slurm --dry-run --farm-config " + (root_ / "site.toml").string(), true), 0)
+  ASSERT_EQ(RunBake("own_chunk.toml", root_ / "out", "clean --farm slurm --dry-run --farm-config " + (root_ / "site.toml").string(), true),
+            0)
       << output_;
   EXPECT_NE(output_.find("--array=0-3%1"), std::string::npos) << output_;  // the site file's stream_tasks stays
   EXPECT_NE(output_.find("--time=10"), std::string::npos) << output_;
@@ -240,11 +245,13 @@ TEST_F(Farm, DryRunShowsTheJobChainAndSettingsAreValidated) {
 
   std::ofstream(root_ / "fake.toml", std::ios::app) << "\n[farm]\nchunk = 0\n";
   EXPECT_EQ(RunBake("fake.toml", root_ / "out", "--farm slurm --dry-run", true), 3) << output_;
-  EXPECT_NE(output_.find("fake.toml:" + std::to_string(std::count(kFakeScene, kFakeScene + std::strlen(kFakeScene), '\n') + 3) + ": farm.chunk"),
-            std::string::npos)
+  EXPECT_NE(
+      output_.find("fake.toml:" + std::to_string(std::count(kFakeScene, kFakeScene + std::strlen(kFakeScene), '\n') + 3) + ": farm.chunk"),
+      std::string::npos)
       << output_;
   std::ofstream(root_ / "bad_site.toml") << "[farm]\n[farm.time]\nsim = \"two hours\"\n";
-  EXPECT_EQ(RunBake("real.toml", root_ / "out", "--farm slurm --dry-run --farm-config " + (root_ / "bad_site.toml").string(), true), 3) << output_;
+  EXPECT_EQ(RunBake("real.toml", root_ / "out", "--farm slurm --dry-run --farm-config " + (root_ / "bad_site.toml").string(), true), 3)
+      << output_;
   EXPECT_NE(output_.find("bad_site.toml:3: farm.time.sim"), std::string::npos) << output_;
 
   // Without Slurm's commands on PATH a submission stops with one clear line.

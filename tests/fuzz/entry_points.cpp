@@ -123,9 +123,9 @@ void BakeState(std::string_view bytes) {
 }
 
 const std::vector<Target>& Targets() {
-  static const std::vector<Target> targets{{"scene", Scene},           {"particle_frame", ParticleFrame},
-                                           {"boundary_file", BoundaryFile}, {"mesh_import", MeshImport},
-                                           {"clean_mesh", CleanMesh},   {"bake_state", BakeState}};
+  static const std::vector<Target> targets{
+      {"scene", Scene},          {"particle_frame", ParticleFrame}, {"boundary_file", BoundaryFile}, {"mesh_import", MeshImport},
+      {"clean_mesh", CleanMesh}, {"bake_state", BakeState}};
   return targets;
 }
 

@@ -19,8 +19,7 @@ int main(int argc, char** argv) {
     return 2;
   }
   const fs::path corpus(argv[1]);
-  for (const char* t : {"particle_frame", "boundary_file", "mesh_import", "clean_mesh", "bake_state"})
-    fs::create_directories(corpus / t);
+  for (const char* t : {"particle_frame", "boundary_file", "mesh_import", "clean_mesh", "bake_state"}) fs::create_directories(corpus / t);
 
   // A simulation frame of three particles as rime-sim writes it, compressed and not.
   io::ParticleFrame frame;

@@ -40,16 +40,21 @@ int main(int argc, char** argv) {
       const auto d = gpu_check::Compare(*a, *b, scene.fluid.spacing);
       std::printf("%-26s %6d %12.3g %12.3g %12.3g %10lld %10lld\n", name.c_str(), frame, d.rms_position, d.max_position, d.max_density,
                   (long long)d.ice_cpu, (long long)d.ice_gpu);
-      report["parity"].push_back({{"scene", name}, {"frame", frame}, {"rms_position_spacings", d.rms_position}, {"max_position_spacings", d.max_position},
-                                  {"max_density_relative", d.max_density}, {"ice_cpu", d.ice_cpu}, {"ice_gpu", d.ice_gpu}});
+      report["parity"].push_back({{"scene", name},
+                                  {"frame", frame},
+                                  {"rms_position_spacings", d.rms_position},
+                                  {"max_position_spacings", d.max_position},
+                                  {"max_density_relative", d.max_density},
+                                  {"ice_cpu", d.ice_cpu},
+                                  {"ice_gpu", d.ice_gpu}});
       const bool ice_ok = std::llabs(d.ice_cpu - d.ice_gpu) <= std::max<std::int64_t>(5, d.ice_cpu / 20);
       if (d.rms_position > 0.05 || d.max_position > 0.5 || d.max_density > 0.005 || !ice_ok) ok = false;
     }
   }
 
   // (2) Benchmark: IISPH steps on the GPU (target: < 10 ms per step at 1M on an H100).
-  std::printf("\nGPU benchmark (float, dt = 1 ms, eta = 0.1 %%)\n%-26s %10s %10s %12s %10s %10s\n", "scene", "water", "boundary", "ms/step", "iter.",
-              "freeze %");
+  std::printf("\nGPU benchmark (float, dt = 1 ms, eta = 0.1 %%)\n%-26s %10s %10s %12s %10s %10s\n", "scene", "water", "boundary", "ms/step",
+              "iter.", "freeze %");
   std::vector<std::tuple<std::string, int, bool, double>> cases{{"dam break 1M", 100, false, 2.5}, {"freezing 1M", 100, true, 2.5}};
   if (!quick) cases.push_back({"dam break 4M", 159, false, 4.0});
   for (const auto& [name, n, freezing, scale] : cases) {
@@ -64,9 +69,10 @@ int main(int argc, char** argv) {
     exec::Synchronize(gpu);
     const double ms = 1e3 * std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() / steps;
     const auto& t = sim->timings();
-    std::printf("%-26s %10lld %10lld %12.2f %10.2f %10.1f\n", name.c_str(), (long long)sim->fluid_count(), (long long)sim->boundary_count(), ms,
-                double(iterations) / steps, 100 * t.freezing / std::max(1e-12, t.total()));
-    report["benchmark"].push_back({{"scene", name}, {"water", sim->fluid_count()}, {"ms_per_step", ms}, {"iterations", double(iterations) / steps}});
+    std::printf("%-26s %10lld %10lld %12.2f %10.2f %10.1f\n", name.c_str(), (long long)sim->fluid_count(), (long long)sim->boundary_count(),
+                ms, double(iterations) / steps, 100 * t.freezing / std::max(1e-12, t.total()));
+    report["benchmark"].push_back(
+        {{"scene", name}, {"water", sim->fluid_count()}, {"ms_per_step", ms}, {"iterations", double(iterations) / steps}});
   }
   std::ofstream("gpu_check.json") << report.dump(2) << "\n";
   std::printf("\n%s; wrote gpu_check.json\n", ok ? "parity within tolerance" : "PARITY TOLERANCE EXCEEDED");

@@ -18,7 +18,8 @@ inline io::Scene DamBreak(int n, bool freezing) {
   const double dp = 0.0264;
   io::Scene scene;
   scene.fluid.spacing = dp;
-  scene.modules = freezing ? std::set<std::string>{"gravity", "viscosity", "surface_tension", "freezing"} : std::set<std::string>{"gravity"};
+  scene.modules =
+      freezing ? std::set<std::string>{"gravity", "viscosity", "surface_tension", "freezing"} : std::set<std::string>{"gravity"};
   scene.solver.time_step = rime::io::TimeStep::kFixed;
   scene.solver.dt = 0.001;
   scene.freezing.glaze_threshold = 0.05;
@@ -64,7 +65,8 @@ inline Difference Compare(const sph::Simulation<float>& cpu, const sph::Simulati
     const double e = Norm(Vec3d(xa[k]) - Vec3d(xb[it->second])) / spacing;
     sum += e * e;
     d.max_position = std::max(d.max_position, e);
-    if (k < ra.size() && it->second < rb.size()) d.max_density = std::max(d.max_density, std::fabs(double(ra[k]) - rb[it->second]) / 1000.0);
+    if (k < ra.size() && it->second < rb.size())
+      d.max_density = std::max(d.max_density, std::fabs(double(ra[k]) - rb[it->second]) / 1000.0);
     ++matched;
   }
   d.rms_position = matched ? std::sqrt(sum / matched) : 0;

@@ -15,8 +15,8 @@ namespace rime {
 namespace {
 
 struct Drips {
-  int hanging = 0;       // ice particles more than 2 d_p below the ledge, clear of the ground
-  double deepest = 0;    // d_p below the ledge's lowest solid particle
+  int hanging = 0;     // ice particles more than 2 d_p below the ledge, clear of the ground
+  double deepest = 0;  // d_p below the ledge's lowest solid particle
 };
 
 Drips BakeAndMeasure(io::Scene scene, const char* variant) {
@@ -43,8 +43,7 @@ Drips BakeAndMeasure(io::Scene scene, const char* variant) {
     d.deepest = std::max(d.deepest, (ledge_bottom - x[i].z) / dp);
   }
   std::printf("%s: %d ice particles hang below the ledge, the deepest %.1f d_p; %lld ice, %lld water\n", variant, d.hanging, d.deepest,
-              (long long)sim.ice_count(),
-              (long long)sim.fluid_count());
+              (long long)sim.ice_count(), (long long)sim.fluid_count());
   return d;
 }
 

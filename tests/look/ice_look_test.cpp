@@ -12,8 +12,8 @@
 namespace rime {
 namespace {
 
-constexpr double kSpacing = 0.02;    // d_p
-constexpr double kRadius = 0.2;      // the solid sphere, 10 d_p
+constexpr double kSpacing = 0.02;  // d_p
+constexpr double kRadius = 0.2;    // the solid sphere, 10 d_p
 constexpr double kPi = 3.14159265358979323846;
 
 struct Glaze {
@@ -70,9 +70,10 @@ TEST(IceLook, FilteredGlazeOnASphereIsOneSmoothCoat) {
   filtered.close_radius = defaults.close;
   filtered.smooth_iterations = defaults.smooth;
   const clean::IceMetrics before = Measure(glaze, raw), after = Measure(glaze, filtered);
-  std::printf("raw: %zu pieces, noise %.3f d_p, sharp %.1f %%, %lld handles; filtered: %zu pieces, noise %.3f d_p, sharp %.1f %%, %lld handles\n",
-              before.components, before.noise_rms, 100 * before.sharp_area_fraction, (long long)before.handles, after.components,
-              after.noise_rms, 100 * after.sharp_area_fraction, (long long)after.handles);
+  std::printf(
+      "raw: %zu pieces, noise %.3f d_p, sharp %.1f %%, %lld handles; filtered: %zu pieces, noise %.3f d_p, sharp %.1f %%, %lld handles\n",
+      before.components, before.noise_rms, 100 * before.sharp_area_fraction, (long long)before.handles, after.components, after.noise_rms,
+      100 * after.sharp_area_fraction, (long long)after.handles);
   // Every wetted solid particle under the cap is covered, by a coat about two particles thick.
   EXPECT_GT(after.glaze_coverage, 0.9);
   EXPECT_NEAR(after.thickness_mean, 2.0, 0.5);

@@ -74,7 +74,7 @@ int Run(const Options& o) {
   const int per_a = o.full ? 40 : 16;
   const int ny = o.full ? 8 : 4;
   const double dp = kA / per_a;
-  const double T_end = 3.4;  // past the last experimental point
+  const double T_end = 3.4;                       // past the last experimental point
   const double t_scale = std::sqrt(2 * kG / kA);  // T = t sqrt(2g/a) (n² = 2)
 
   io::Scene scene = sph::test::ColumnScene(dp, per_a, ny, 2 * per_a, 0);
@@ -96,10 +96,11 @@ int Run(const Options& o) {
   // with a = per_a d_p; the front z is measured from there and its particle's half width added.
   const double origin = 0.6 * dp;
   auto front_z = [&] { return FrontX(sim.Positions(), dp) + 0.5 * dp - origin; };
-  std::printf("column a = %.4f m = %d d_p (d_p = %.3g mm), height 2a, %d particles across the channel depth, "
-              "%lld water particles, %lld boundary particles; modules: %s\n",
-              kA, per_a, 1e3 * dp, ny, (long long)sim.fluid_count(), (long long)sim.boundary_count(),
-              o.viscosity ? "gravity, viscosity (spec defaults)" : "gravity only (inviscid)");
+  std::printf(
+      "column a = %.4f m = %d d_p (d_p = %.3g mm), height 2a, %d particles across the channel depth, "
+      "%lld water particles, %lld boundary particles; modules: %s\n",
+      kA, per_a, 1e3 * dp, ny, (long long)sim.fluid_count(), (long long)sim.boundary_count(),
+      o.viscosity ? "gravity, viscosity (spec defaults)" : "gravity only (inviscid)");
 
   Stopwatch watch;
   std::vector<Sample> samples{{0.0, front_z() / kA}};
@@ -142,11 +143,12 @@ int Run(const Options& o) {
   std::printf("\n   T     Z exp   Z sim   deviation\n");
   for (const Point& p : kMartinMoyce) {
     const double z = z_at(p.T);
-    std::printf("  %.2f   %.2f    %.3f   %+6.1f%%%s\n", p.T, p.Z, z, 100 * (z - p.Z) / p.Z, p.T <= 3 ? "" : "   (T > 3: not in the statistics)");
+    std::printf("  %.2f   %.2f    %.3f   %+6.1f%%%s\n", p.T, p.Z, z, 100 * (z - p.Z) / p.Z,
+                p.T <= 3 ? "" : "   (T > 3: not in the statistics)");
   }
   const Stats raw = stats(0);
-  std::printf("\nT <= 3: mean |deviation| %.1f%%, max |deviation| %.1f%%, mean signed deviation %+.1f%%\n", 100 * raw.mean,
-              100 * raw.worst, 100 * raw.signed_mean);
+  std::printf("\nT <= 3: mean |deviation| %.1f%%, max |deviation| %.1f%%, mean signed deviation %+.1f%%\n", 100 * raw.mean, 100 * raw.worst,
+              100 * raw.signed_mean);
   // Diagnosis only (not a criterion): the start of the experiment (release of the column) is not
   // modelled, so report how well the curve's shape fits once the simulation is delayed by the
   // best constant ΔT.

@@ -69,15 +69,15 @@ constexpr double kMinSnr = 2;
 struct Config {
   std::string model = "akinci2013";
   std::vector<double> epsilons;  // initial stretches of z, one run each; empty: the variant's
-  double beta0 = -1;      // Monaghan β0 of the viscosity module; < 0: the model's default
-  double gamma = 0.05;    // Akinci 2013 γ (scene default)
-  double kappa = 0.02;    // He 2014 κ, N (scene default, spec §12)
-  std::vector<double> radii;  // in h; empty: the variant's
-  double periods = 5;     // observation window in estimated periods (see Oscillate)
-  double max_time = 30;   // s, upper bound of the window
-  int settle_steps = 30;  // quasi-static steps after the stretch
-  double dt_max = 0.006;  // s, spec §7 bound of the CFL step
-  double mu = 1e-3;       // Pa s, Morris viscosity when the viscosity module runs
+  double beta0 = -1;             // Monaghan β0 of the viscosity module; < 0: the model's default
+  double gamma = 0.05;           // Akinci 2013 γ (scene default)
+  double kappa = 0.02;           // He 2014 κ, N (scene default, spec §12)
+  std::vector<double> radii;     // in h; empty: the variant's
+  double periods = 5;            // observation window in estimated periods (see Oscillate)
+  double max_time = 30;          // s, upper bound of the window
+  int settle_steps = 30;         // quasi-static steps after the stretch
+  double dt_max = 0.006;         // s, spec §7 bound of the CFL step
+  double mu = 1e-3;              // Pa s, Morris viscosity when the viscosity module runs
 
   bool Akinci() const { return model == "akinci2013"; }
   // β0 in effect: the flag's, else none with Akinci (its cohesion holds the drop) and 0.01 with He.
@@ -89,10 +89,10 @@ struct Result {
   double radius = 0, period = 0, sigma = 0, sigma_laplace = 0, damping = 0;
   double period_1 = 0, period_2 = 0;  // damped periods from crossings 1→3 and 2→4
   double snr = 0;                     // |extreme of the 4th half cycle| / noise
-  double s0 = 0, s_eq = 0;                   // s at release and its equilibrium, in R²
-  double noise = 0;                          // rms of s over the last third of the window, in R²
-  int escaped = 0;                           // particles farther than 2R from the drop at the end
-  double window = 0;        // observed time, s
+  double s0 = 0, s_eq = 0;            // s at release and its equilibrium, in R²
+  double noise = 0;                   // rms of s over the last third of the window, in R²
+  int escaped = 0;                    // particles farther than 2R from the drop at the end
+  double window = 0;                  // observed time, s
   std::int64_t particles = 0, steps = 0;
   int crossings = 0;
   double seconds = 0;
@@ -212,7 +212,8 @@ Result Oscillate(double radius_in_dp, double epsilon, const Config& cfg, bool tr
       const auto v = sim.Velocities();
       double vmax = 0;
       for (const auto& u : v) vmax = std::max(vmax, Norm(u));
-      std::printf("    trace R=%.2fh t=%.5f s/R^2=%+.6f escaped=%d vmax=%.4f\n", r.radius / kDp, ts.back(), ss.back() / R2, r.escaped, vmax);
+      std::printf("    trace R=%.2fh t=%.5f s/R^2=%+.6f escaped=%d vmax=%.4f\n", r.radius / kDp, ts.back(), ss.back() / R2, r.escaped,
+                  vmax);
     }
   }
   r.window = ts.back();
@@ -270,12 +271,14 @@ int Run(const Options& o, const Config& cfg) {
   if (cfg.ExtraMu()) viscosity += fmt::format(", mu = {:.3g} Pa s", cfg.mu);
   std::string eps_list;
   for (double e : epsilons) eps_list += fmt::format("{}{:.3g}", eps_list.empty() ? "" : ", ", e);
-  std::printf("d_p = h = %.3g m, rho0 = %.0f kg/m^3, no gravity; surface tension %s (%s); viscosity %s;\n"
-              "initial stretch eps = %s (uniform ellipsoid: s = ((1+eps)^2 - 1/(1+eps))/5 R^2), %d quasi-static steps, released at rest; "
-              "window %.3g estimated periods (<= %.3g s)\n",
-              kDp, kRho, cfg.model.c_str(), model.c_str(), viscosity.c_str(), eps_list.c_str(), cfg.settle_steps, cfg.periods, cfg.max_time);
-  std::printf("\n  R/h   particles   eps  s0/R^2  s_eq/R^2  noise/R^2  crossings  T_1 (s)  T_2 (s)  damping (1/s)  gamma/omega0  period T0 (s)"
-              "  sigma_eff (N/m)  SNR_4  escaped  Laplace sigma (N/m)  window (s)  steps  wall (s)\n");
+  std::printf(
+      "d_p = h = %.3g m, rho0 = %.0f kg/m^3, no gravity; surface tension %s (%s); viscosity %s;\n"
+      "initial stretch eps = %s (uniform ellipsoid: s = ((1+eps)^2 - 1/(1+eps))/5 R^2), %d quasi-static steps, released at rest; "
+      "window %.3g estimated periods (<= %.3g s)\n",
+      kDp, kRho, cfg.model.c_str(), model.c_str(), viscosity.c_str(), eps_list.c_str(), cfg.settle_steps, cfg.periods, cfg.max_time);
+  std::printf(
+      "\n  R/h   particles   eps  s0/R^2  s_eq/R^2  noise/R^2  crossings  T_1 (s)  T_2 (s)  damping (1/s)  gamma/omega0  period T0 (s)"
+      "  sigma_eff (N/m)  SNR_4  escaped  Laplace sigma (N/m)  window (s)  steps  wall (s)\n");
   struct PerRadius {
     double radius = 0, period = 0, low = 1e300, high = 0, damping = 0, sigma = 0;
     std::vector<double> periods, dampings;
@@ -310,10 +313,12 @@ int Run(const Options& o, const Config& cfg) {
     for (std::size_t ei = 0; ei < epsilons.size(); ++ei) {
       const double eps = epsilons[ei];
       const Result& r = jobs[ri * epsilons.size() + ei].r;
-      std::printf("  %4.2f  %9lld  %4.2f  %6.4f  %+8.4f  %9.5f  %9d  %7.3f  %7.3f  %13.3f  %12.3f  %13.3f  %15.4f  %5.1f  %7d  %19.3f  %10.2f  %5lld  %8.1f\n",
-                  r.radius / kDp, (long long)r.particles, eps, r.s0, r.s_eq, r.noise, r.crossings, r.period_1, r.period_2, r.damping,
-                  r.period > 0 ? r.damping * r.period / (2 * kPi) : 0, r.period, r.sigma, r.snr, r.escaped, r.sigma_laplace, r.window,
-                  (long long)r.steps, r.seconds);
+      std::printf(
+          "  %4.2f  %9lld  %4.2f  %6.4f  %+8.4f  %9.5f  %9d  %7.3f  %7.3f  %13.3f  %12.3f  %13.3f  %15.4f  %5.1f  %7d  %19.3f  %10.2f  "
+          "%5lld  %8.1f\n",
+          r.radius / kDp, (long long)r.particles, eps, r.s0, r.s_eq, r.noise, r.crossings, r.period_1, r.period_2, r.damping,
+          r.period > 0 ? r.damping * r.period / (2 * kPi) : 0, r.period, r.sigma, r.snr, r.escaped, r.sigma_laplace, r.window,
+          (long long)r.steps, r.seconds);
       pr.radius = r.radius;
       if (r.crossings < 4 || r.snr < kMinSnr) {
         std::printf("        left out: %d zero crossings of s - s_eq in %.2f s, 4th half cycle %.1f x the noise (< %.0f)\n", r.crossings,
@@ -348,8 +353,10 @@ int Run(const Options& o, const Config& cfg) {
     log_p.push_back(std::log(pr.period));
     sigmas.push_back(pr.sigma);
   }
-  bool ok = Check(measured, fmt::format("every radius measured in at least {} of its {} runs (4 zero crossings, the 4th half cycle >= {:.0f} x "
-                                        "the noise)", min_runs, epsilons.size(), kMinSnr));
+  bool ok =
+      Check(measured, fmt::format("every radius measured in at least {} of its {} runs (4 zero crossings, the 4th half cycle >= {:.0f} x "
+                                  "the noise)",
+                                  min_runs, epsilons.size(), kMinSnr));
   if (log_r.size() < 2) return 1;
   const double exponent = FitLine(log_r, log_p).slope;
   const double smin = *std::min_element(sigmas.begin(), sigmas.end()), smax = *std::max_element(sigmas.begin(), sigmas.end());
@@ -396,8 +403,8 @@ int main(int argc, char** argv) {
   Config cfg;
   double settle = cfg.settle_steps;
   // Flags with a value; the rest (--full, --trace, --help) go to ParseOptions.
-  const std::pair<const char*, double*> numbers[] = {{"--beta0", &cfg.beta0},   {"--periods", &cfg.periods}, {"--dt-max", &cfg.dt_max},
-                                                     {"--max-time", &cfg.max_time}, {"--mu", &cfg.mu},        {"--settle", &settle}};
+  const std::pair<const char*, double*> numbers[] = {{"--beta0", &cfg.beta0},       {"--periods", &cfg.periods}, {"--dt-max", &cfg.dt_max},
+                                                     {"--max-time", &cfg.max_time}, {"--mu", &cfg.mu},           {"--settle", &settle}};
   const std::pair<const char*, std::vector<double>*> lists[] = {{"--epsilon", &cfg.epsilons}, {"--radii", &cfg.radii}};
   std::vector<char*> rest{argv[0]};
   for (int i = 1; i < argc; ++i) {

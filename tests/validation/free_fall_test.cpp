@@ -55,8 +55,8 @@ double FreeFallError(double dt) {
 TEST(Validation, FreeFallMatchesTheAnalyticTrajectory) {
   const double coarse = FreeFallError(0.004), fine = FreeFallError(0.002);
   const double bound = 0.5 * 9.81 * 0.004 * 0.3;  // g Δt t / 2
-  std::printf("free fall, 0.3 s: centroid error %.3g m at dt = 4 ms (bound %.3g), %.3g m at 2 ms: ratio %.2f (first order: 2)\n",
-              coarse, bound, fine, coarse / fine);
+  std::printf("free fall, 0.3 s: centroid error %.3g m at dt = 4 ms (bound %.3g), %.3g m at 2 ms: ratio %.2f (first order: 2)\n", coarse,
+              bound, fine, coarse / fine);
   EXPECT_LT(coarse, 1.05 * bound);
   EXPECT_NEAR(coarse / fine, 2.0, 0.1);
 }

@@ -52,9 +52,11 @@ int Run(const Options& o) {
     // The measured density is that at the start of the step just taken; the predicted one its end.
     double rho_max = 0;
     for (const double r : sim.Densities()) rho_max = std::max(rho_max, r);
-    std::printf("t %.4f s  dt %.4f s  %3d iterations  predicted compression: average %.3f%% max %.3f%%  measured max %.3f%%  "
-                "max speed %.3f m/s\n", sim.time(), st.dt, st.pressure_iterations, 100 * st.average_density_error,
-                100 * st.max_density_error, 100 * (rho_max / kRho - 1), st.max_speed);
+    std::printf(
+        "t %.4f s  dt %.4f s  %3d iterations  predicted compression: average %.3f%% max %.3f%%  measured max %.3f%%  "
+        "max speed %.3f m/s\n",
+        sim.time(), st.dt, st.pressure_iterations, 100 * st.average_density_error, 100 * st.max_density_error, 100 * (rho_max / kRho - 1),
+        st.max_speed);
   }
   // Layer sums over the averaging window: pressure, height, count (columns ≥ 2.5 d_p from the
   // side walls, as in spec T13, so the walls' own pressure error stays out).
@@ -88,8 +90,8 @@ int Run(const Options& o) {
   const double surface = 0.6 * dp + double(n) * dp * dp * dp / ((width - 1.2 * dp) * (width - 1.2 * dp));
   const double top_surface = top_sum / double(top_count) + 0.5 * dp;
 
-  std::printf("settled %.1f s, then averaged %.1f s (%d steps, %.1f pressure iterations per step); %.1f s wall\n", settle, average,
-              steps, double(iterations) / steps, watch.seconds());
+  std::printf("settled %.1f s, then averaged %.1f s (%d steps, %.1f pressure iterations per step); %.1f s wall\n", settle, average, steps,
+              double(iterations) / steps, watch.seconds());
   std::printf("free surface: %.4f m from the volume (used below), %.4f m from the top layer, ", surface, top_surface);
 
   std::vector<double> z_all, p_all;

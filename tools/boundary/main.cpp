@@ -24,7 +24,7 @@ using namespace rime;
 
 struct Options {
   std::string input, output;
-  tool::OverrideFlags<io::SolidObject> solid;  // --spacing-ratio
+  tool::OverrideFlags<io::SolidObject> solid;    // --spacing-ratio
   tool::OverrideFlags<io::FluidSettings> water;  // --spacing, --smoothing-ratio
   std::vector<double> scale, rotate, translate;
   std::string up_axis, name;
@@ -41,11 +41,12 @@ Vec3d ThreeValues(const std::vector<double>& v, const char* flag) {
 }
 
 nlohmann::json Summarize(const boundary::BoundaryObject& o, const fs::path& file) {
-  log::Info("{}: {} triangles read, {} degenerate skipped, {} particles written (d_b = {:.4g} m, mean nearest-neighbour spacing "
-            "{:.4g} m = {:.2f} d_b, {} near-duplicates removed), bounds ({:.4g}, {:.4g}, {:.4g}) .. ({:.4g}, {:.4g}, {:.4g}) m, {}",
-            o.name, o.stats.triangles, o.stats.degenerate_skipped, o.size(), o.boundary_spacing, o.mean_spacing,
-            o.mean_spacing / o.boundary_spacing, o.stats.near_duplicates_removed, o.bounds_min.x, o.bounds_min.y, o.bounds_min.z,
-            o.bounds_max.x, o.bounds_max.y, o.bounds_max.z, FormatDuration(o.seconds));
+  log::Info(
+      "{}: {} triangles read, {} degenerate skipped, {} particles written (d_b = {:.4g} m, mean nearest-neighbour spacing "
+      "{:.4g} m = {:.2f} d_b, {} near-duplicates removed), bounds ({:.4g}, {:.4g}, {:.4g}) .. ({:.4g}, {:.4g}, {:.4g}) m, {}",
+      o.name, o.stats.triangles, o.stats.degenerate_skipped, o.size(), o.boundary_spacing, o.mean_spacing,
+      o.mean_spacing / o.boundary_spacing, o.stats.near_duplicates_removed, o.bounds_min.x, o.bounds_min.y, o.bounds_min.z, o.bounds_max.x,
+      o.bounds_max.y, o.bounds_max.z, FormatDuration(o.seconds));
   return {{"name", o.name},
           {"file", file.string()},
           {"shape", o.shape},
@@ -101,8 +102,9 @@ int Run(const Options& opt, const tool::CommonOptions& common) {
   if (IsScene(input)) {
     if (!opt.scale.empty() || !opt.rotate.empty() || !opt.translate.empty() || !opt.up_axis.empty() || !opt.name.empty() ||
         opt.separate_parts)
-      throw Error(ExitCode::kUsage, "--scale, --rotate, --translate, --up-axis, --name and --separate-parts are for a single mesh; "
-                                    "a scene file sets them per [[solid]]");
+      throw Error(ExitCode::kUsage,
+                  "--scale, --rotate, --translate, --up-axis, --name and --separate-parts are for a single mesh; "
+                  "a scene file sets them per [[solid]]");
     const io::Scene scene = io::LoadScene(input);
     scene_hash = scene.hash;
     io::FluidSettings water = scene.fluid;
@@ -140,8 +142,7 @@ int Run(const Options& opt, const tool::CommonOptions& common) {
     opt.water.ApplyTo(water);
     settings.particle_spacing = water.spacing;
     settings.smoothing_ratio = water.smoothing_ratio;
-    if (output.extension() != ".h5part")
-      throw Error(ExitCode::kUsage, "the output of a single mesh is a .h5part file", output.string());
+    if (output.extension() != ".h5part") throw Error(ExitCode::kUsage, "the output of a single mesh is a .h5part file", output.string());
     objects.emplace_back(boundary::BuildBoundaryObject(solid, opt.object_id, input, settings), output);
   }
 

@@ -37,8 +37,8 @@ struct Frame {
   fs::path input;
   std::vector<fs::path> outputs;  // one mesh file, or .obj and .ply
   fs::path report;                // per-frame quality report beside folder outputs ("" for one file)
-  std::string stem;      // "ice" of ice.0012.obj
-  std::int64_t number = -1;  // -1: no frame number in the name
+  std::string stem;               // "ice" of ice.0012.obj
+  std::int64_t number = -1;       // -1: no frame number in the name
 };
 
 bool IsMeshFile(const fs::path& p) {
@@ -254,9 +254,8 @@ int main(int argc, char** argv) {
     for (const std::string& line : lines) log::Info("{}", line);
     const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     if (!report_file.empty()) WriteFileAtomically(report_file, nlohmann::json(reports).dump(2) + "\n");
-    log::Info("{} frame(s), {} -> {} triangles in {:.2f} s ({:.0f}k input triangles/s with {} thread(s)); {} warning(s)",
-              frames.size(), faces_in.load(), faces_out.load(), seconds, faces_in / seconds / 1e3, exec::CpuThreads(),
-              warnings.load());
+    log::Info("{} frame(s), {} -> {} triangles in {:.2f} s ({:.0f}k input triangles/s with {} thread(s)); {} warning(s)", frames.size(),
+              faces_in.load(), faces_out.load(), seconds, faces_in / seconds / 1e3, exec::CpuThreads(), warnings.load());
     nlohmann::json summary = {{"tool", "rime-clean"},
                               {"frames", frames.size()},
                               {"triangles_in", faces_in.load()},

@@ -20,10 +20,10 @@ namespace rime::tool {
 struct CommonOptions {
   bool quiet = false;
   bool verbose = false;
-  int threads = 0;          // -j: CPU threads (0 = all cores)
+  int threads = 0;  // -j: CPU threads (0 = all cores)
   std::string device = "auto";
-  std::string frames;       // "A-B", "A" or "" (all)
-  std::string json_summary; // path or ""
+  std::string frames;         // "A-B", "A" or "" (all)
+  std::string json_summary;   // path or ""
   std::string memory_budget;  // --memory-budget SIZE, "" = the available memory
   std::string sandbox;        // --sandbox DIR, "" = off
 };

@@ -87,8 +87,7 @@ int main(int argc, char** argv) {
     const fs::path sim = out / "cache" / "sim";
     const fs::path meshes = raw ? out / "surface" : out / "clean";
     const std::string stem = raw ? "ice" : mesh_stem;
-    if (!fs::is_directory(sim))
-      throw InputError("no particle frames: bake the scene first (rime-bake " + scene_file + ")", sim.string());
+    if (!fs::is_directory(sim)) throw InputError("no particle frames: bake the scene first (rime-bake " + scene_file + ")", sim.string());
     std::set<std::uint32_t> objects;  // glaze is measured on the objects, not on the ground
     for (std::uint32_t i = 0; i < scene.solids.size(); ++i)
       if (scene.solids[i].shape != io::SolidShape::kPlane) objects.insert(i);
@@ -120,14 +119,15 @@ int main(int argc, char** argv) {
       }
       const io::TriMesh mesh = has_mesh ? io::ReadMesh(mesh_file) : io::TriMesh{};
       const clean::IceMetrics m = clean::MeasureIce(mesh, frame, scene.solver.gravity, objects, settings);
-      fmt::print("{:>5} {:>6} {:>6} {:>6} {:>6} {:>5} {:>7.2f} {:>6.3f} {:>6.3f} {:>6.2f} {:>4.2f}±{:<4.2f} {:>7} {:>7} {:>6.1f} {:>6.1f}\n",
-                 f, m.water, m.ice, m.components, m.specks, m.tiny_pieces, m.handles_per_1000_dp2, m.noise_rms,
-                 m.sharp_area_fraction, m.glaze_coverage, m.thickness_mean, m.thickness_spread, m.icicles.size(), m.hanging_icicles,
-                 m.icicle_length_mean, m.icicle_length_max);
+      fmt::print(
+          "{:>5} {:>6} {:>6} {:>6} {:>6} {:>5} {:>7.2f} {:>6.3f} {:>6.3f} {:>6.2f} {:>4.2f}±{:<4.2f} {:>7} {:>7} {:>6.1f} {:>6.1f}\n", f,
+          m.water, m.ice, m.components, m.specks, m.tiny_pieces, m.handles_per_1000_dp2, m.noise_rms, m.sharp_area_fraction,
+          m.glaze_coverage, m.thickness_mean, m.thickness_spread, m.icicles.size(), m.hanging_icicles, m.icicle_length_mean,
+          m.icicle_length_max);
       rows.push_back(ToJson(f, frame.time, m));
     }
-    const nlohmann::json doc = {{"format", "rime.inspect"}, {"version", 1}, {"scene", scene_file},
-                                {"spacing", scene.fluid.spacing}, {"meshes", meshes.string()}, {"frames", rows}};
+    const nlohmann::json doc = {{"format", "rime.inspect"},  {"version", 1},  {"scene", scene_file}, {"spacing", scene.fluid.spacing},
+                                {"meshes", meshes.string()}, {"frames", rows}};
     const fs::path json_path = json_file.empty() ? out / "inspect.json" : fs::path(json_file);
     WriteFileAtomically(json_path, doc.dump(1) + "\n");
     log::Info("metrics of {} frames written to {}", rows.size(), json_path.string());

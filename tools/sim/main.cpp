@@ -140,18 +140,16 @@ int Run(const rime::io::Scene& scene, const Options& opt, const rime::tool::Comm
     for (std::string line; std::getline(in, line);) {
       try {
         if (json::parse(line).at("frame").get<std::int64_t>() <= resume_from) stats_lines.push_back(line);
-      } catch (const std::exception&) {
-      }
+      } catch (const std::exception&) {}
     }
   } else {
     sim.Initialize();
     io::WriteParticleFrame(io::FramePath(out, "particles", 0, "h5part"), sim.Snapshot(0));
   }
-  for (std::int64_t f = 0; f <= first_frame; ++f)
-    index.push_back({io::FramePath(out, "particles", f, "h5part"), f / fps});
+  for (std::int64_t f = 0; f <= first_frame; ++f) index.push_back({io::FramePath(out, "particles", f, "h5part"), f / fps});
   io::WriteSequenceIndex(out / "particles.h5part", index);
-  log::Info("{} water particles, {} boundary particles, {} frames at {} fps on {}", sim.fluid_count(), sim.boundary_count(),
-            last_frame, fps, device.description);
+  log::Info("{} water particles, {} boundary particles, {} frames at {} fps on {}", sim.fluid_count(), sim.boundary_count(), last_frame,
+            fps, device.description);
 
   sim.EnableTimings(true);
   const auto wall_start = std::chrono::steady_clock::now();
@@ -165,7 +163,8 @@ int Run(const rime::io::Scene& scene, const Options& opt, const rime::tool::Comm
     std::int64_t steps = 0, iterations = 0, max_iterations = 0;
     double dt_min = 1e30, dt_max = 0, sum_error = 0, sum_measured = 0, max_error = 0, frame_speed = 0;
     while (sim.time() < stop - 1e-9 * std::max(1.0, stop)) {
-      if (g_interrupted) throw Error(ExitCode::kInterrupted, fmt::format("interrupted during frame {}; frames up to {} are complete", f, f - 1));
+      if (g_interrupted)
+        throw Error(ExitCode::kInterrupted, fmt::format("interrupted during frame {}; frames up to {} are complete", f, f - 1));
       const double dt = sim.NextTimeStep(stop);
       sph::StepStats s;
       try {
@@ -224,16 +223,18 @@ int Run(const rime::io::Scene& scene, const Options& opt, const rime::tool::Comm
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - wall_start).count();
   const auto& t = sim.timings();
   const double us_per_particle_step = particle_steps ? 1e6 * wall / double(particle_steps) : 0;
-  log::Info("done: {} frames, {} steps, {:.2f} pressure iterations/step, measured density error {:.3g}% on average, max speed {:.3g} m/s, "
-            "{} water, {} ice, {} particles left the domain",
-            last_frame - first_frame, total_steps, total_steps ? double(total_iterations) / total_steps : 0.0,
-            total_steps ? 100 * measured_sum / double(total_steps) : 0.0, max_speed, sim.fluid_count(), sim.ice_count(), removed);
+  log::Info(
+      "done: {} frames, {} steps, {:.2f} pressure iterations/step, measured density error {:.3g}% on average, max speed {:.3g} m/s, "
+      "{} water, {} ice, {} particles left the domain",
+      last_frame - first_frame, total_steps, total_steps ? double(total_iterations) / total_steps : 0.0,
+      total_steps ? 100 * measured_sum / double(total_steps) : 0.0, max_speed, sim.fluid_count(), sim.ice_count(), removed);
   const double total = std::max(1e-12, t.total());
-  log::Info("time: {} total, {:.3g} us per particle-step (neighbors {:.0f}%, forces {:.0f}%, pressure {:.0f}%, integration {:.0f}%, "
-            "freezing {:.0f}%), peak memory {} MiB, {} threads",
-            FormatDuration(wall), us_per_particle_step, 100 * t.neighbor_search / total, 100 * t.non_pressure / total,
-            100 * t.pressure_solve / total, 100 * t.integration / total, 100 * t.freezing / total, tool::PeakMemoryBytes() >> 20,
-            exec::CpuThreads());
+  log::Info(
+      "time: {} total, {:.3g} us per particle-step (neighbors {:.0f}%, forces {:.0f}%, pressure {:.0f}%, integration {:.0f}%, "
+      "freezing {:.0f}%), peak memory {} MiB, {} threads",
+      FormatDuration(wall), us_per_particle_step, 100 * t.neighbor_search / total, 100 * t.non_pressure / total,
+      100 * t.pressure_solve / total, 100 * t.integration / total, 100 * t.freezing / total, tool::PeakMemoryBytes() >> 20,
+      exec::CpuThreads());
   tool::WriteSummary(common, {{"tool", "rime-sim"},
                               {"scene", scene.file.string()},
                               {"frames", last_frame - first_frame},
@@ -258,13 +259,15 @@ int Run(const rime::io::Scene& scene, const Options& opt, const rime::tool::Comm
 }  // namespace
 
 int main(int argc, char** argv) {
-  CLI::App app{"Simulates the water of a scene (IISPH with viscosity, surface tension, air pressure and freezing) and writes\n"
-               "one H5Part frame per output frame: FOLDER/particles.NNNN.h5part, the sequence index FOLDER/particles.h5part\n"
-               "(open it in ParaView) and FOLDER/stats.jsonl. Every frame is a complete checkpoint."};
+  CLI::App app{
+      "Simulates the water of a scene (IISPH with viscosity, surface tension, air pressure and freezing) and writes\n"
+      "one H5Part frame per output frame: FOLDER/particles.NNNN.h5part, the sequence index FOLDER/particles.h5part\n"
+      "(open it in ParaView) and FOLDER/stats.jsonl. Every frame is a complete checkpoint."};
   rime::tool::CommonOptions common;
   Options opt;
-  rime::tool::Setup(app, "rime-sim", common,
-                    rime::tool::kThreads | rime::tool::kDevice | rime::tool::kJsonSummary | rime::tool::kMemoryBudget | rime::tool::kSandbox);
+  rime::tool::Setup(
+      app, "rime-sim", common,
+      rime::tool::kThreads | rime::tool::kDevice | rime::tool::kJsonSummary | rime::tool::kMemoryBudget | rime::tool::kSandbox);
   app.add_option("scene", opt.scene, "Scene file (TOML)")->required()->check(CLI::ExistingFile);
   app.add_option("-o,--output", opt.output, "Output folder for the frames")->required();
   app.add_option("--boundary", opt.boundary_dir, "Folder with the boundary files written by rime-boundary (default: OUTPUT/../boundary)");
@@ -282,6 +285,6 @@ int main(int argc, char** argv) {
     rime::io::Scene scene = rime::io::LoadScene(opt.scene);
     scene_overrides.ApplyTo(scene.info);
     return scene.fluid.precision == rime::io::Precision::kDouble ? Run<double>(scene, opt, common, sandbox, budget)
-                                             : Run<float>(scene, opt, common, sandbox, budget);
+                                                                 : Run<float>(scene, opt, common, sandbox, budget);
   });
 }

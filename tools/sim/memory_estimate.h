@@ -7,10 +7,10 @@
 namespace rime {
 
 struct SimulationCounts {
-  double fluid = 0;         // water particles at their most (blocks plus everything the emitters add)
-  double boundary = 0;      // boundary particles of every solid
-  bool freezing = false;    // the freezing module's per-particle state
-  int scalar_bytes = 4;     // [water] precision: 4 (float) or 8 (double)
+  double fluid = 0;       // water particles at their most (blocks plus everything the emitters add)
+  double boundary = 0;    // boundary particles of every solid
+  bool freezing = false;  // the freezing module's per-particle state
+  int scalar_bytes = 4;   // [water] precision: 4 (float) or 8 (double)
 };
 
 /// Water particles the scene can hold: its blocks at [water] spacing plus what each emitter emits

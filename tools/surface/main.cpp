@@ -93,9 +93,9 @@ std::vector<FrameFile> CollectFrames(const std::vector<std::string>& inputs, con
     for (std::int64_t f = first; f <= last && missing.size() < 20; ++f)
       if (!frames.count(f)) missing.push_back(f);
     if (!missing.empty())
-      throw InputError(fmt::format("missing frame{} {} in range {}-{}", missing.size() > 1 ? "s" : "", fmt::join(missing, ", "),
-                                   first, last),
-                       inputs.size() == 1 ? inputs[0] : "inputs");
+      throw InputError(
+          fmt::format("missing frame{} {} in range {}-{}", missing.size() > 1 ? "s" : "", fmt::join(missing, ", "), first, last),
+          inputs.size() == 1 ? inputs[0] : "inputs");
   }
   // Check every header (format, version, kind) before any output is written.
   for (const FrameFile& f : out) io::ReadParticleFrameHeader(f.path, "particles");
@@ -149,27 +149,28 @@ void CheckMemory(const std::vector<FrameFile>& frames, const std::vector<PhaseJo
   const double total = ConcurrentPeak(estimates, concurrent, &worst);
   const double total_voxels = ConcurrentPeak(voxels, concurrent);
   const std::string context =
-      concurrent > 1 ? fmt::format("{} frames at once, largest {}, voxel {:.3g} mm", concurrent, frames[worst].path.string(),
-                                   voxel_sizes[worst] * 1e3)
-                     : fmt::format("frame {}, voxel {:.3g} mm", frames[worst].path.string(), voxel_sizes[worst] * 1e3);
+      concurrent > 1
+          ? fmt::format("{} frames at once, largest {}, voxel {:.3g} mm", concurrent, frames[worst].path.string(), voxel_sizes[worst] * 1e3)
+          : fmt::format("frame {}, voxel {:.3g} mm", frames[worst].path.string(), voxel_sizes[worst] * 1e3);
   CheckMemoryBudget(budget, total, FormatCount(total_voxels) + " voxels", context);
 }
 
 }  // namespace
 
 int main(int argc, char** argv) {
-  CLI::App app{"Turns ice (and water) particles of rime-sim frames into OpenVDB level sets and triangle meshes "
-               "(anisotropic ellipsoids, spec §10)."};
+  CLI::App app{
+      "Turns ice (and water) particles of rime-sim frames into OpenVDB level sets and triangle meshes "
+      "(anisotropic ellipsoids, spec §10)."};
   tool::CommonOptions common;
   tool::Setup(app, "rime-surface", common, tool::kThreads | tool::kFrames | tool::kJsonSummary | tool::kMemoryBudget | tool::kSandbox);
   Options o;
-  app.add_option("frames", o.inputs, "Particle frames (NAME.NNNN.h5part), a folder of them, or the sequence index NAME.h5part")
-      ->required();
+  app.add_option("frames", o.inputs, "Particle frames (NAME.NNNN.h5part), a folder of them, or the sequence index NAME.h5part")->required();
   app.add_option("-o,--output", o.output, "Output folder (created); writes ice.NNNN.{vdb,obj,ply} and water.NNNN.*")->required();
   app.add_option("--scene", o.scene, "Scene file whose [surface] section gives the defaults (flags override it)");
   tool::OverrideFlags<io::SurfaceSettings> overrides;
   overrides.AddTo(app);
-  app.add_option("--field", o.field, "Field for every phase (else the scene's ice_field and water_field): ellipsoids, kernel_sum or isotropic")
+  app.add_option("--field", o.field,
+                 "Field for every phase (else the scene's ice_field and water_field): ellipsoids, kernel_sum or isotropic")
       ->check(CLI::IsMember(io::EnumNames<io::SurfaceField>()));
   app.add_flag("--strict", o.strict, "Refuse ice frames without stored anisotropy instead of falling back to isotropic");
   app.add_flag("--keep-voids", o.keep_voids, "Keep enclosed gaps between ellipsoids as voids (inner shells in the mesh)");
@@ -190,7 +191,9 @@ int main(int argc, char** argv) {
       throw Error(ExitCode::kUsage, "give --voxel-size or --resolution, not both");
     if (surfacing.resolution == 1) throw Error(ExitCode::kUsage, "--resolution must be 0 (off) or at least 2");
     if (surfacing.formats.empty()) throw Error(ExitCode::kUsage, "--format needs at least one of obj, ply, vdb");
-    const auto has = [&](const char* f) { return std::find(surfacing.formats.begin(), surfacing.formats.end(), f) != surfacing.formats.end(); };
+    const auto has = [&](const char* f) {
+      return std::find(surfacing.formats.begin(), surfacing.formats.end(), f) != surfacing.formats.end();
+    };
 
     surface::Settings settings;
     settings.voxel_ratio = surfacing.voxel_ratio;
@@ -240,8 +243,7 @@ int main(int argc, char** argv) {
         surface::ParticleSet particles = surface::SelectPhase(frame, job.phase, select, warnings);
         for (const auto& w : warnings) log::Warn("{}", w);
         if (particles.size() == 0)
-          log::Warn("{}: frame {} has no {} particles; writing empty {} outputs", ff.path.string(), frame.frame, job.prefix,
-                    job.prefix);
+          log::Warn("{}: frame {} has no {} particles; writing empty {} outputs", ff.path.string(), frame.frame, job.prefix, job.prefix);
         surface::Settings s = settings;
         s.field = job.field;
         const surface::Result result = surface::Reconstruct(particles, s);
@@ -261,20 +263,19 @@ int main(int argc, char** argv) {
           report.files.push_back(p.string());
         }
         report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-        log::Debug("frame {} {}: {} particles, {} active voxels, {} triangles, {:.2f} s (prepare {:.2f}, rasterize {:.2f}, "
-                   "filters {:.2f}, mesh {:.2f})",
-                   report.frame, report.phase, report.stats.particles, report.stats.active_voxels, report.stats.triangles,
-                   report.seconds, report.stats.seconds_prepare, report.stats.seconds_rasterize, report.stats.seconds_filter,
-                   report.stats.seconds_mesh);
+        log::Debug(
+            "frame {} {}: {} particles, {} active voxels, {} triangles, {:.2f} s (prepare {:.2f}, rasterize {:.2f}, "
+            "filters {:.2f}, mesh {:.2f})",
+            report.frame, report.phase, report.stats.particles, report.stats.active_voxels, report.stats.triangles, report.seconds,
+            report.stats.seconds_prepare, report.stats.seconds_rasterize, report.stats.seconds_filter, report.stats.seconds_mesh);
         std::lock_guard<std::mutex> lock(mutex);
         reports.push_back(std::move(report));
       }
       progress.Advance();
     });
     progress.Finish();
-    std::sort(reports.begin(), reports.end(), [](const FrameReport& a, const FrameReport& b) {
-      return std::tie(a.frame, a.phase) < std::tie(b.frame, b.phase);
-    });
+    std::sort(reports.begin(), reports.end(),
+              [](const FrameReport& a, const FrameReport& b) { return std::tie(a.frame, a.phase) < std::tie(b.frame, b.phase); });
 
     const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     const std::uint64_t peak = tool::PeakMemoryBytes();
@@ -295,8 +296,8 @@ int main(int argc, char** argv) {
                                    {"filled_void_voxels", r.stats.filled_void_voxels},
                                    {"seconds", r.seconds},
                                    {"files", r.files}});
-      log::Info("frame {:>5} {:<5} {:>9} particles {:>10} active voxels {:>9} triangles {:>8.2f} s", r.frame, r.phase,
-                r.stats.particles, r.stats.active_voxels, r.stats.triangles, r.seconds);
+      log::Info("frame {:>5} {:<5} {:>9} particles {:>10} active voxels {:>9} triangles {:>8.2f} s", r.frame, r.phase, r.stats.particles,
+                r.stats.active_voxels, r.stats.triangles, r.seconds);
     }
     summary["particles"] = particles;
     summary["active_voxels"] = voxels;

@@ -36,8 +36,8 @@ void Append(SurfaceSamples& all, SurfaceSamples&& part) {
 
 }  // namespace
 
-BoundaryObject BuildBoundaryObject(const io::SolidObject& object, std::uint32_t object_id,
-                                   const std::filesystem::path& mesh_path, const BoundarySettings& settings) {
+BoundaryObject BuildBoundaryObject(const io::SolidObject& object, std::uint32_t object_id, const std::filesystem::path& mesh_path,
+                                   const BoundarySettings& settings) {
   const auto start = std::chrono::steady_clock::now();
   const bool from_file = object.shape == io::SolidShape::kMesh;
   const std::string where = from_file ? mesh_path.string() : "solid " + object.name;
@@ -88,7 +88,8 @@ BoundaryObject BuildBoundaryObject(const io::SolidObject& object, std::uint32_t 
   for (io::TriMesh& part : parts) ApplyTransform(part, object.transform);
   if (settings.before_sampling && from_file) {
     double triangles = 0, particles = 0;
-    for (const io::TriMesh& part : parts) triangles += double(part.triangle_count()), particles += EstimateSampleCount(part, options.spacing);
+    for (const io::TriMesh& part : parts)
+      triangles += double(part.triangle_count()), particles += EstimateSampleCount(part, options.spacing);
     // Beyond --max-particles the sampler refuses the input itself (exit 3), before any memory.
     if (particles <= double(settings.max_particles)) settings.before_sampling(triangles, particles, where);
   }

@@ -3,7 +3,6 @@
 #include <fmt/format.h>
 #include <tbb/parallel_for.h>
 
-
 #include <algorithm>
 #include <array>
 #include <atomic>
@@ -190,7 +189,7 @@ void WeldRepresentatives(const std::vector<Vec3f>& positions, Scratch<std::uint3
   const auto bits = [&](std::uint32_t v) {  // -0 folded into +0 so that equal floats have equal bits
     const Vec3f& p = positions[v];
     return std::array<std::uint32_t, 3>{std::bit_cast<std::uint32_t>(p.x + 0.0f), std::bit_cast<std::uint32_t>(p.y + 0.0f),
-                                         std::bit_cast<std::uint32_t>(p.z + 0.0f)};
+                                        std::bit_cast<std::uint32_t>(p.z + 0.0f)};
   };
   // Load factor 0.375 to 0.75: short probe sequences and a table of at most 8 bytes per vertex.
   const std::uint32_t size = std::bit_ceil(static_cast<std::uint32_t>(nv + nv / 3 + 16)), mask = size - 1;
@@ -199,7 +198,8 @@ void WeldRepresentatives(const std::vector<Vec3f>& positions, Scratch<std::uint3
   exec::cpu::ParallelFor(Index(nv), [&](Index i) {
     const std::uint32_t v = static_cast<std::uint32_t>(i);
     const auto key = bits(v);
-    std::uint64_t h = (std::uint64_t(key[0]) | std::uint64_t(key[1]) << 32) * 0x9e3779b97f4a7c15ULL ^ std::uint64_t(key[2]) * 0xc2b2ae3d27d4eb4fULL;
+    std::uint64_t h =
+        (std::uint64_t(key[0]) | std::uint64_t(key[1]) << 32) * 0x9e3779b97f4a7c15ULL ^ std::uint64_t(key[2]) * 0xc2b2ae3d27d4eb4fULL;
     h ^= h >> 31;
     h *= 0xff51afd7ed558ccdULL;
     for (std::uint32_t slot = static_cast<std::uint32_t>(h >> 32) & mask;; slot = (slot + 1) & mask) {
@@ -299,7 +299,8 @@ void ThinAndOrder(const Vec3f* positions, const Vec3f* normals, std::size_t tota
     bool crowded = false;
     for (std::uint32_t s = begin; s < end; ++s) {
       // The next slots first: on a crowded surface they are usually close (same cell, input order).
-      const bool near_next = (s > 0 && SquaredNorm(sorted[s - 1] - sorted[s]) < r2) || (s + 1 < total && SquaredNorm(sorted[s + 1] - sorted[s]) < r2);
+      const bool near_next =
+          (s > 0 && SquaredNorm(sorted[s - 1] - sorted[s]) < r2) || (s + 1 < total && SquaredNorm(sorted[s + 1] - sorted[s]) < r2);
       undecided[s] = near_next || hood.AnyWithin(sorted, cell_size, sorted[s], s, r2, [&](int k) { return hood.end[k]; });
       keep[s] = !undecided[s];
       crowded = crowded || undecided[s];
@@ -421,8 +422,7 @@ SurfaceSamples SampleSurface(const io::TriMesh& mesh, const SampleOptions& optio
   });
   const std::size_t valid_count = std::size_t(DeterministicSum(nt, [&](std::size_t t) { return double(valid[t]); }));
   stats.degenerate_skipped = nt - valid_count;
-  if (valid_count == 0)
-    throw InputError(fmt::format("all {} triangles are degenerate (zero area)", nt), options.source);
+  if (valid_count == 0) throw InputError(fmt::format("all {} triangles are degenerate (zero area)", nt), options.source);
 
   // Valid triangles around every welded vertex (CSR): counted and placed with atomics, then each
   // vertex's short list sorted, so the lists (and every sum over them) do not depend on threads.
@@ -439,7 +439,8 @@ SurfaceSamples SampleSurface(const io::TriMesh& mesh, const SampleOptions& optio
       for (std::uint32_t v : tris[t])
         incident[std::atomic_ref<std::uint32_t>(cursor[v]).fetch_add(1, std::memory_order_relaxed)] = std::uint32_t(t);
   });
-  exec::cpu::ParallelFor(Index(nw), [&](Index v) { std::sort(incident.data() + incident_offset[v], incident.data() + incident_offset[v + 1]); });
+  exec::cpu::ParallelFor(Index(nw),
+                         [&](Index v) { std::sort(incident.data() + incident_offset[v], incident.data() + incident_offset[v + 1]); });
   phase("triangles + incidence");
 
   // 3. Per welded vertex: area-weighted normal, and the distinct edges (a, b > a) it owns, with
@@ -482,9 +483,8 @@ SurfaceSamples SampleSurface(const io::TriMesh& mesh, const SampleOptions& optio
   stats.edge_samples = Scan(edge_offset);
   Scratch<std::uint32_t> face_offset(nt + 1);
   const auto triangle = [&](std::size_t t) { return Triangle{{wp(tris[t][0]), wp(tris[t][1]), wp(tris[t][2])}}; };
-  exec::cpu::ParallelFor(Index(nt), [&](Index t) {
-    face_offset[t] = valid[t] ? std::uint32_t(SampleFaceInterior(triangle(t), d, [](const Vec3d&) {})) : 0;
-  });
+  exec::cpu::ParallelFor(
+      Index(nt), [&](Index t) { face_offset[t] = valid[t] ? std::uint32_t(SampleFaceInterior(triangle(t), d, [](const Vec3d&) {})) : 0; });
   face_offset[nt] = 0;
   stats.face_samples = Scan(face_offset);
   const std::uint64_t total = std::uint64_t(stats.vertex_samples) + stats.edge_samples + stats.face_samples;

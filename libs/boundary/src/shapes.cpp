@@ -102,8 +102,7 @@ void AppendSegment(std::vector<std::pair<double, double>>& profile, std::pair<do
 }
 
 void RequirePositive(double value, const char* what) {
-  if (!(value > 0) || !std::isfinite(value))
-    throw InputError(fmt::format("{} must be positive and finite, got {}", what, value));
+  if (!(value > 0) || !std::isfinite(value)) throw InputError(fmt::format("{} must be positive and finite, got {}", what, value));
 }
 
 }  // namespace
@@ -172,12 +171,18 @@ io::TriMesh MakeTorus(double major_radius, double minor_radius, double max_edge)
 io::TriMesh MakeProceduralMesh(const io::SolidObject& o, double max_edge) {
   RequirePositive(max_edge, "tessellation edge length");
   switch (o.shape) {
-    case io::SolidShape::kBox: return MakeBox(o.size, o.container, max_edge);
-    case io::SolidShape::kPlane: return MakePlane(o.size.x, o.size.y, max_edge);
-    case io::SolidShape::kSphere: return MakeSphere(o.radius, max_edge);
-    case io::SolidShape::kCylinder: return MakeCylinder(o.radius, o.height, max_edge);
-    case io::SolidShape::kTorus: return MakeTorus(o.radius, o.minor_radius, max_edge);
-    case io::SolidShape::kMesh: break;
+    case io::SolidShape::kBox:
+      return MakeBox(o.size, o.container, max_edge);
+    case io::SolidShape::kPlane:
+      return MakePlane(o.size.x, o.size.y, max_edge);
+    case io::SolidShape::kSphere:
+      return MakeSphere(o.radius, max_edge);
+    case io::SolidShape::kCylinder:
+      return MakeCylinder(o.radius, o.height, max_edge);
+    case io::SolidShape::kTorus:
+      return MakeTorus(o.radius, o.minor_radius, max_edge);
+    case io::SolidShape::kMesh:
+      break;
   }
   throw InputError(fmt::format("'{}' is not a procedural shape (box, plane, sphere, cylinder, torus)", io::EnumName(o.shape)));
 }
@@ -186,12 +191,23 @@ double ProceduralSurfaceArea(const io::SolidObject& o) {
   double area = 0;
   const Vec3d& s = o.size;
   switch (o.shape) {
-    case io::SolidShape::kBox: area = 2 * (s.x * s.y + s.y * s.z + s.z * s.x) - (o.container ? s.x * s.y : 0); break;
-    case io::SolidShape::kPlane: area = s.x * s.y; break;
-    case io::SolidShape::kSphere: area = 4 * kPi * o.radius * o.radius; break;
-    case io::SolidShape::kCylinder: area = 2 * kPi * o.radius * (o.height + o.radius); break;
-    case io::SolidShape::kTorus: area = 4 * kPi * kPi * o.radius * o.minor_radius; break;
-    case io::SolidShape::kMesh: break;
+    case io::SolidShape::kBox:
+      area = 2 * (s.x * s.y + s.y * s.z + s.z * s.x) - (o.container ? s.x * s.y : 0);
+      break;
+    case io::SolidShape::kPlane:
+      area = s.x * s.y;
+      break;
+    case io::SolidShape::kSphere:
+      area = 4 * kPi * o.radius * o.radius;
+      break;
+    case io::SolidShape::kCylinder:
+      area = 2 * kPi * o.radius * (o.height + o.radius);
+      break;
+    case io::SolidShape::kTorus:
+      area = 4 * kPi * kPi * o.radius * o.minor_radius;
+      break;
+    case io::SolidShape::kMesh:
+      break;
   }
   const Vec3d& k = o.transform.scale;
   const double stretch = std::max({std::abs(k.x), std::abs(k.y), std::abs(k.z)});

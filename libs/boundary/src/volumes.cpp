@@ -76,8 +76,8 @@ void ComputeBoundaryVolumes(const exec::Device& device, const Vec3<T>* positions
   else BoundaryVolumesCpu(grid.view(), grid.cell_count(), kernel, volumes);
   exec::Synchronize(device);
   const auto t2 = std::chrono::steady_clock::now();
-  log::Debug("boundary volumes of {} particles: grid {:.1f} ms, kernel {:.1f} ms", n,
-             1e3 * std::chrono::duration<double>(t1 - t0).count(), 1e3 * std::chrono::duration<double>(t2 - t1).count());
+  log::Debug("boundary volumes of {} particles: grid {:.1f} ms, kernel {:.1f} ms", n, 1e3 * std::chrono::duration<double>(t1 - t0).count(),
+             1e3 * std::chrono::duration<double>(t2 - t1).count());
 }
 
 template <class T>

@@ -30,7 +30,6 @@ fs::path TempDir(const std::string& name) {
   return dir;
 }
 
-
 io::SolidObject MeshObject(const fs::path& file) {
   io::SolidObject o;
   o.name = "thing";
@@ -88,8 +87,8 @@ TEST(BoundaryObject, MeshFileFormatsThroughAssimp) {
   const fs::path dir = TempDir("formats");
   // One cube written as OBJ (quads), ASCII STL (triangle soup) and PLY; all give the same particles.
   test::WriteFile(dir / "cube.obj",
-            "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nv 0 0 1\nv 1 0 1\nv 0 1 1\nv 1 1 1\n"
-            "f 1 3 4 2\nf 5 6 8 7\nf 1 2 6 5\nf 3 7 8 4\nf 1 5 7 3\nf 2 4 8 6\n");
+                  "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nv 0 0 1\nv 1 0 1\nv 0 1 1\nv 1 1 1\n"
+                  "f 1 3 4 2\nf 5 6 8 7\nf 1 2 6 5\nf 3 7 8 4\nf 1 5 7 3\nf 2 4 8 6\n");
   io::WriteMesh(dir / "cube.ply", test_support::UnitCube());
   std::string stl = "solid cube\n";
   const io::TriMesh cube = test_support::UnitCube();
@@ -207,10 +206,11 @@ TEST(BoundaryObject, SharedMeshes) {
     for (float r : nearest) min_nn = std::min(min_nn, r);
     EXPECT_GE(min_nn, 0.5 * db * (1 - 1e-5));
     for (float v : o.volumes) ASSERT_TRUE(std::isfinite(v) && v > 0);
-    std::printf("%s: %zu triangles (%zu degenerate skipped), %zu vertex + %zu edge + %zu face samples, %zu near-duplicates "
-                "removed -> %zu particles at d_b = %.4g m, mean spacing %.3f d_b\n",
-                c.file, o.stats.triangles, o.stats.degenerate_skipped, o.stats.vertex_samples, o.stats.edge_samples,
-                o.stats.face_samples, o.stats.near_duplicates_removed, o.size(), db, o.mean_spacing / db);
+    std::printf(
+        "%s: %zu triangles (%zu degenerate skipped), %zu vertex + %zu edge + %zu face samples, %zu near-duplicates "
+        "removed -> %zu particles at d_b = %.4g m, mean spacing %.3f d_b\n",
+        c.file, o.stats.triangles, o.stats.degenerate_skipped, o.stats.vertex_samples, o.stats.edge_samples, o.stats.face_samples,
+        o.stats.near_duplicates_removed, o.size(), db, o.mean_spacing / db);
     RecordProperty(std::string(c.file) + "_particles", std::to_string(o.size()));
   }
 }

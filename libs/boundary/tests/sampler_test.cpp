@@ -29,8 +29,8 @@ SurfaceSamples Sample(const io::TriMesh& mesh, double spacing) {
 }
 
 // Nearest-neighbour distances within [lo, hi]·s and every surface point within cover·s of a particle.
-void ExpectSpacingAndCoverage(const io::TriMesh& mesh, const SurfaceSamples& s, double spacing, double lo, double hi,
-                              double cover, std::size_t probes = 20000) {
+void ExpectSpacingAndCoverage(const io::TriMesh& mesh, const SurfaceSamples& s, double spacing, double lo, double hi, double cover,
+                              std::size_t probes = 20000) {
   ASSERT_GT(s.size(), 0u);
   const auto nearest = NearestNeighborDistances(s.positions, float(3 * spacing));
   float min_nn = INFINITY, max_nn = 0;

@@ -71,8 +71,8 @@ void CheckSampledShape(const io::TriMesh& mesh, const Analytic& exact, double db
 
 TEST(Shapes, Sphere) {
   const double r = 0.3, db = 0.01;
-  CheckSampledShape(MakeSphere(r, db), {[&](const Vec3d& p) { return Norm(p) - r; }, [](const Vec3d& p) { return p / Norm(p); }},
-                    db, 4 * kPi * r * r, 4.0 / 3 * kPi * r * r * r);
+  CheckSampledShape(MakeSphere(r, db), {[&](const Vec3d& p) { return Norm(p) - r; }, [](const Vec3d& p) { return p / Norm(p); }}, db,
+                    4 * kPi * r * r, 4.0 / 3 * kPi * r * r * r);
 }
 
 TEST(Shapes, Cylinder) {
@@ -121,8 +121,7 @@ TEST(Shapes, BoxPlaneAndContainer) {
   // On box edges and corners the area-weighted vertex normal leans towards the face whose grid
   // triangles around that vertex are larger, so it is only close to the symmetric bisector.
   CheckSampledShape(MakeBox(size, false, db), {box_distance, box_normal}, db, area, size.x * size.y * size.z, 0.9);
-  CheckSampledShape(MakePlane(0.5, 0.2, db), {[](const Vec3d& p) { return p.z; }, [](const Vec3d&) { return Vec3d(0, 0, 1); }}, db,
-                    0.1, 0);
+  CheckSampledShape(MakePlane(0.5, 0.2, db), {[](const Vec3d& p) { return p.z; }, [](const Vec3d&) { return Vec3d(0, 0, 1); }}, db, 0.1, 0);
 
   // Container: no top face, every normal faces the inside.
   const io::TriMesh tank = MakeBox(size, true, db);

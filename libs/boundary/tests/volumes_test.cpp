@@ -26,8 +26,8 @@ void CompareWithBruteForce() {
   const SurfaceSamples s = SampleSurface(MakeSphere(0.1, options.spacing), options);
   std::vector<Vec3<T>> points;
   for (const Vec3f& p : s.positions)
-    points.push_back(Vec3<T>(T(p.x + jitter(rng) * options.spacing), T(p.y + jitter(rng) * options.spacing),
-                             T(p.z + jitter(rng) * options.spacing)));
+    points.push_back(
+        Vec3<T>(T(p.x + jitter(rng) * options.spacing), T(p.y + jitter(rng) * options.spacing), T(p.z + jitter(rng) * options.spacing)));
   points.push_back(Vec3<T>(T(5), T(5), T(5)));
   const std::vector<T> fast = ComputeBoundaryVolumes<T>(exec::Device::Cpu(), points, T(h));
   ASSERT_EQ(fast.size(), points.size());
@@ -66,9 +66,7 @@ void ExpectPerParticleKernelAgrees() {
 TEST(BoundaryVolumes, PerParticleKernelAndCpuPathAgreeFloat) { ExpectPerParticleKernelAgrees<float>(); }
 TEST(BoundaryVolumes, PerParticleKernelAndCpuPathAgreeDouble) { ExpectPerParticleKernelAgrees<double>(); }
 
-TEST(BoundaryVolumes, EmptyInput) {
-  EXPECT_TRUE(ComputeBoundaryVolumes<float>(exec::Device::Cpu(), std::vector<Vec3f>{}, 0.1f).empty());
-}
+TEST(BoundaryVolumes, EmptyInput) { EXPECT_TRUE(ComputeBoundaryVolumes<float>(exec::Device::Cpu(), std::vector<Vec3f>{}, 0.1f).empty()); }
 
 // Spec §3 / T5: a plane sampled at d_b in {1, 0.75, 0.5} d_p (h = d_p) gives interior volumes
 // {1.427, 0.803, 0.357} d_p^3, and a fluid particle of a half-space lattice at z0 = d_p above it

@@ -67,8 +67,7 @@ bool RepeatsVertex(const std::array<std::uint32_t, 3>& t) { return t[0] == t[1] 
 /// manifoldness (Surface_mesh refuses them).
 std::size_t BuildDirect(const io::TriMesh& in, Mesh& mesh, std::size_t& repeated_vertex_faces) {
   mesh.clear();
-  mesh.reserve(Mesh::size_type(in.positions.size()), Mesh::size_type(in.triangles.size() * 3 / 2),
-               Mesh::size_type(in.triangles.size()));
+  mesh.reserve(Mesh::size_type(in.positions.size()), Mesh::size_type(in.triangles.size() * 3 / 2), Mesh::size_type(in.triangles.size()));
   for (const Vec3f& p : in.positions) mesh.add_vertex(Point(p.x, p.y, p.z));
   std::size_t refused = 0;
   for (const auto& t : in.triangles) {
@@ -146,8 +145,7 @@ io::TriMesh ToTriMesh(Mesh& mesh) {
   out.triangles.reserve(mesh.number_of_faces());
   for (FaceIndex f : mesh.faces()) {
     const HalfedgeIndex h = mesh.halfedge(f);
-    out.triangles.push_back({std::uint32_t(mesh.source(h)), std::uint32_t(mesh.target(h)),
-                             std::uint32_t(mesh.target(mesh.next(h)))});
+    out.triangles.push_back({std::uint32_t(mesh.source(h)), std::uint32_t(mesh.target(h)), std::uint32_t(mesh.target(mesh.next(h)))});
   }
   return out;
 }
@@ -201,8 +199,10 @@ class Chain {
         report_.faces_dropped_on_load = refused;
         report_.degenerate_faces_removed += repeated;
         const std::size_t split = PMP::duplicate_non_manifold_vertices(mesh_);
-        detail = fmt::format("built directly ({} faces with a repeated vertex skipped, {} non-manifold faces dropped, "
-                             "{} non-manifold vertices split)", repeated, refused, split);
+        detail = fmt::format(
+            "built directly ({} faces with a repeated vertex skipped, {} non-manifold faces dropped, "
+            "{} non-manifold vertices split)",
+            repeated, refused, split);
         if (refused > 0 && settings_.repair == io::Repair::kNever)
           report_.warnings.push_back(fmt::format("{} non-manifold faces dropped on load (repair = \"never\")", refused));
       }
@@ -252,8 +252,7 @@ class Chain {
         const std::size_t c = fcc[f];
         ++faces[c];
         const HalfedgeIndex h = mesh_.halfedge(f);
-        const Point &a = mesh_.point(mesh_.source(h)), &b = mesh_.point(mesh_.target(h)),
-                    &p = mesh_.point(mesh_.target(mesh_.next(h)));
+        const Point &a = mesh_.point(mesh_.source(h)), &b = mesh_.point(mesh_.target(h)), &p = mesh_.point(mesh_.target(mesh_.next(h)));
         area[c] += std::sqrt(CGAL::to_double(CGAL::squared_area(a, b, p)));
         volume[c] += CGAL::to_double(CGAL::scalar_product(a - CGAL::ORIGIN, CGAL::cross_product(b - CGAL::ORIGIN, p - CGAL::ORIGIN))) / 6;
       }
@@ -301,8 +300,8 @@ class Chain {
         std::vector<FaceIndex> new_faces;
         std::vector<VertexIndex> new_vertices;
         if (settings_.fair_holes) {
-          const bool faired = std::get<0>(PMP::triangulate_refine_and_fair_hole(mesh_, h, std::back_inserter(new_faces),
-                                                                             std::back_inserter(new_vertices)));
+          const bool faired =
+              std::get<0>(PMP::triangulate_refine_and_fair_hole(mesh_, h, std::back_inserter(new_faces), std::back_inserter(new_vertices)));
           if (!faired) ++failed_fairing;
         } else {
           PMP::triangulate_and_refine_hole(mesh_, h, std::back_inserter(new_faces), std::back_inserter(new_vertices));
@@ -337,9 +336,8 @@ class Chain {
         } else {
           // Area smoothing needs Ceres (absent here; CGAL would print a warning): angles only.
           // The safety check (no new self-intersection) halves the speed; it is kept.
-          PMP::angle_and_area_smoothing(mesh_, params::number_of_iterations(settings_.smooth_iterations)
-                                                   .use_angle_smoothing(true)
-                                                   .use_area_smoothing(false));
+          PMP::angle_and_area_smoothing(
+              mesh_, params::number_of_iterations(settings_.smooth_iterations).use_angle_smoothing(true).use_area_smoothing(false));
         }
         return fmt::format("{} x {}", settings_.smooth_iterations, io::EnumName(settings_.smooth));
       });
@@ -438,7 +436,8 @@ class Chain {
  private:
   double MeanEdge() const {
     double sum = 0;
-    for (auto e : mesh_.edges()) sum += std::sqrt(CGAL::to_double(CGAL::squared_distance(mesh_.point(mesh_.vertex(e, 0)), mesh_.point(mesh_.vertex(e, 1)))));
+    for (auto e : mesh_.edges())
+      sum += std::sqrt(CGAL::to_double(CGAL::squared_distance(mesh_.point(mesh_.vertex(e, 0)), mesh_.point(mesh_.vertex(e, 1)))));
     return mesh_.number_of_edges() ? sum / double(mesh_.number_of_edges()) : 0;
   }
 
@@ -490,7 +489,8 @@ CleanResult Clean(const io::TriMesh& input, const io::CleanupSettings& settings)
     report.warnings.push_back(fmt::format("could not be made manifold: {} non-manifold edges, {} non-manifold vertices",
                                           report.after.non_manifold_edges, report.after.non_manifold_vertices));
   if (report.after.boundary_edges > 0)
-    report.warnings.push_back(fmt::format("not closed: {} boundary edges in {} holes left", report.after.boundary_edges, report.holes_left));
+    report.warnings.push_back(
+        fmt::format("not closed: {} boundary edges in {} holes left", report.after.boundary_edges, report.holes_left));
   report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return result;
 }

@@ -125,7 +125,7 @@ class Decimator {
       std::size_t done = 0;
       for (std::size_t i = 0; i < candidates.size() && faces > target_faces; ++i) {
         if (i == sorted) {
-          if (done > 0) break;  // the rest waits for the next pass, re-costed
+          if (done > 0) break;                                               // the rest waits for the next pass, re-costed
           sorted = SortCheapest(candidates, sorted, 2 * (sorted + needed));  // none valid yet: look further
         }
         const Candidate& c = candidates[i];

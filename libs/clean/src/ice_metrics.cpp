@@ -77,8 +77,7 @@ std::vector<Vec3d> TaubinSmoothed(const io::TriMesh& mesh, int iterations) {
   return x;
 }
 
-void MeasureMesh(const io::TriMesh& mesh, const std::vector<Vec3f>& solid, double dp, const IceMetricsSettings& s,
-                 IceMetrics& m) {
+void MeasureMesh(const io::TriMesh& mesh, const std::vector<Vec3f>& solid, double dp, const IceMetricsSettings& s, IceMetrics& m) {
   const std::size_t nv = mesh.positions.size();
   m.triangles = mesh.triangles.size();
   if (m.triangles == 0) return;
@@ -220,7 +219,11 @@ void MeasureParticles(const io::ParticleFrame& frame, const Vec3d& gravity, cons
   std::vector<double> film(n, 0.0);
   if (frame.Has("water_film")) {
     const auto& data = frame.attributes.at("water_film");
-    std::visit([&](const auto& values) { for (std::size_t i = 0; i < n; ++i) film[i] = double(values[i]); }, data);
+    std::visit(
+        [&](const auto& values) {
+          for (std::size_t i = 0; i < n; ++i) film[i] = double(values[i]);
+        },
+        data);
   }
   std::vector<std::uint32_t> object(n, 0);
   if (frame.Has("object_id")) object = frame.Get<std::uint32_t>("object_id");
@@ -319,8 +322,8 @@ void MeasureParticles(const io::ParticleFrame& frame, const Vec3d& gravity, cons
 
 }  // namespace
 
-IceMetrics MeasureIce(const io::TriMesh& mesh, const io::ParticleFrame& frame, const Vec3d& gravity,
-                      const std::set<std::uint32_t>& objects, const IceMetricsSettings& settings) {
+IceMetrics MeasureIce(const io::TriMesh& mesh, const io::ParticleFrame& frame, const Vec3d& gravity, const std::set<std::uint32_t>& objects,
+                      const IceMetricsSettings& settings) {
   IceMetrics m;
   const double dp = frame.spacing;
   std::vector<Vec3f> x;

@@ -12,12 +12,12 @@ constexpr double kPi = 3.14159265358979323846;
 
 io::TriMesh Icosphere(double radius, int subdivisions, Vec3d center) {
   const double t = (1 + std::sqrt(5.0)) / 2;
-  std::vector<Vec3d> unit = {{-1, t, 0}, {1, t, 0}, {-1, -t, 0}, {1, -t, 0}, {0, -1, t}, {0, 1, t},
-                             {0, -1, -t}, {0, 1, -t}, {t, 0, -1}, {t, 0, 1}, {-t, 0, -1}, {-t, 0, 1}};
+  std::vector<Vec3d> unit = {{-1, t, 0},  {1, t, 0},  {-1, -t, 0}, {1, -t, 0}, {0, -1, t},  {0, 1, t},
+                             {0, -1, -t}, {0, 1, -t}, {t, 0, -1},  {t, 0, 1},  {-t, 0, -1}, {-t, 0, 1}};
   for (Vec3d& p : unit) p /= Norm(p);
-  std::vector<std::array<std::uint32_t, 3>> faces = {
-      {0, 11, 5}, {0, 5, 1},  {0, 1, 7},   {0, 7, 10}, {0, 10, 11}, {1, 5, 9}, {5, 11, 4}, {11, 10, 2}, {10, 7, 6}, {7, 1, 8},
-      {3, 9, 4},  {3, 4, 2},  {3, 2, 6},   {3, 6, 8},  {3, 8, 9},   {4, 9, 5}, {2, 4, 11}, {6, 2, 10},  {8, 6, 7},  {9, 8, 1}};
+  std::vector<std::array<std::uint32_t, 3>> faces = {{0, 11, 5},  {0, 5, 1},  {0, 1, 7},  {0, 7, 10}, {0, 10, 11}, {1, 5, 9}, {5, 11, 4},
+                                                     {11, 10, 2}, {10, 7, 6}, {7, 1, 8},  {3, 9, 4},  {3, 4, 2},   {3, 2, 6}, {3, 6, 8},
+                                                     {3, 8, 9},   {4, 9, 5},  {2, 4, 11}, {6, 2, 10}, {8, 6, 7},   {9, 8, 1}};
   for (int s = 0; s < subdivisions; ++s) {
     std::unordered_map<std::uint64_t, std::uint32_t> midpoint;
     auto middle = [&](std::uint32_t a, std::uint32_t b) {
@@ -62,7 +62,8 @@ io::TriMesh SurfaceNets(const std::function<double(const Vec3d&)>& sdf, Vec3d mi
   // Two node slices (k, k+1) and two cell layers (k-1, k): memory grows with the cross-section only.
   const std::size_t slice = std::size_t(nx + 1) * std::size_t(ny + 1);
   std::vector<double> values[2] = {std::vector<double>(slice), std::vector<double>(slice)};
-  std::vector<std::int32_t> cells[2] = {std::vector<std::int32_t>(std::size_t(nx) * ny, -1), std::vector<std::int32_t>(std::size_t(nx) * ny, -1)};
+  std::vector<std::int32_t> cells[2] = {std::vector<std::int32_t>(std::size_t(nx) * ny, -1),
+                                        std::vector<std::int32_t>(std::size_t(nx) * ny, -1)};
   auto fill_slice = [&](std::vector<double>& v, int k) {
     for (int j = 0; j <= ny; ++j)
       for (int i = 0; i <= nx; ++i) v[std::size_t(j) * (nx + 1) + i] = sdf(node(i, j, k));
@@ -140,8 +141,8 @@ io::TriMesh NoisyBall(std::size_t target_triangles, std::uint64_t seed) {
   // Surface nets give about 3 triangles per cell face of surface (1.5 crossed edges per h^2, 2 each).
   const double cell = std::sqrt(3 * 4 * kPi * radius * radius / double(target_triangles));
   const double reach = radius * 1.1 + 2 * cell;
-  return SurfaceNets([&](const Vec3d& p) { return Norm(p) - radius * (1 + IceNoise(p, seed)); }, Vec3d::Splat(-reach),
-                     Vec3d::Splat(reach), cell);
+  return SurfaceNets([&](const Vec3d& p) { return Norm(p) - radius * (1 + IceNoise(p, seed)); }, Vec3d::Splat(-reach), Vec3d::Splat(reach),
+                     cell);
 }
 
 io::TriMesh NoisyTorus(std::size_t target_triangles, std::uint64_t seed) {

@@ -27,7 +27,8 @@ double RelativeChange(double before, double after) { return before != 0 ? (after
 
 nlohmann::json ToJson(const CleanReport& r) {
   nlohmann::json operations = nlohmann::json::array();
-  for (const auto& op : r.operations) operations.push_back({{"name", op.name}, {"seconds", op.seconds}, {"cpu_seconds", op.cpu_seconds}, {"detail", op.detail}});
+  for (const auto& op : r.operations)
+    operations.push_back({{"name", op.name}, {"seconds", op.seconds}, {"cpu_seconds", op.cpu_seconds}, {"detail", op.detail}});
   return {{"before", ToJson(r.before)},
           {"after", ToJson(r.after)},
           {"manifold", r.manifold()},
@@ -60,14 +61,13 @@ std::string Count(std::size_t n) {
 }  // namespace
 
 std::string SummaryLine(const CleanReport& r) {
-  std::string shape = r.manifold() ? (r.closed() ? "closed manifold" : fmt::format("manifold, {} boundary edges", r.after.boundary_edges))
-                                   : "NOT MANIFOLD";
-  std::string intersections =
-      r.self_intersecting_pairs < 0 ? "" : fmt::format(", {} self-intersecting pairs", r.self_intersecting_pairs);
+  std::string shape =
+      r.manifold() ? (r.closed() ? "closed manifold" : fmt::format("manifold, {} boundary edges", r.after.boundary_edges)) : "NOT MANIFOLD";
+  std::string intersections = r.self_intersecting_pairs < 0 ? "" : fmt::format(", {} self-intersecting pairs", r.self_intersecting_pairs);
   return fmt::format("{} -> {} faces, {} -> {} components, {}{}, volume {:+.2f}%, area {:+.2f}%, min angle {:.1f}°, {:.2f} s",
-                     Count(r.before.faces), Count(r.after.faces), r.before.components, r.after.components, shape,
-                     intersections, 100 * RelativeChange(r.before.volume, r.after.volume),
-                     100 * RelativeChange(r.before.area, r.after.area), r.after.min_angle_deg, r.seconds);
+                     Count(r.before.faces), Count(r.after.faces), r.before.components, r.after.components, shape, intersections,
+                     100 * RelativeChange(r.before.volume, r.after.volume), 100 * RelativeChange(r.before.area, r.after.area),
+                     r.after.min_angle_deg, r.seconds);
 }
 
 }  // namespace rime::clean

@@ -98,7 +98,8 @@ TEST(Clean, TransferVelocitiesFindsTheClosestPointOfABruteForceScan) {
     const Vec3d q(queries[i]);
     double brute = std::numeric_limits<double>::infinity();
     for (const auto& t : sphere.triangles)
-      brute = std::min(brute, BruteDistance2(q, Vec3d(sphere.positions[t[0]]), Vec3d(sphere.positions[t[1]]), Vec3d(sphere.positions[t[2]])));
+      brute =
+          std::min(brute, BruteDistance2(q, Vec3d(sphere.positions[t[0]]), Vec3d(sphere.positions[t[1]]), Vec3d(sphere.positions[t[2]])));
     EXPECT_NEAR(Norm(Vec3d(closest[i]) - q), std::sqrt(brute), 1e-5) << i;
   }
 }
@@ -112,8 +113,8 @@ TEST(Clean, NoisySphereWithSpecksAndHoleBecomesOneClosedComponent) {
   ASSERT_NEAR(sphere_volume, 4.0 / 3.0 * kPi, 0.02 * 4.0 / 3.0 * kPi);
 
   io::TriMesh input = sphere;
-  procedural::PunchHole(input, {0, 0, 1}, 0.12);  // a hole of about 40 border edges
-  for (int i = 0; i < 6; ++i) {                     // ice specks: tiny separate spheres
+  procedural::PunchHole(input, {0, 0, 1}, 0.12);                                         // a hole of about 40 border edges
+  for (int i = 0; i < 6; ++i) {                                                          // ice specks: tiny separate spheres
     io::TriMesh speck = procedural::Icosphere(0.02, 0, {1.3 + 0.1 * i, 0.2 * i, -0.3});  // 20 faces
     procedural::Append(input, speck);
   }
@@ -290,8 +291,8 @@ TEST(Decimate, ErrorBoundLimitsTheDistance) {
   // Plane distances bound the distance to the new surface only up to the triangles' curvature:
   // allow a factor of 2 (measured: 0.43 x the bound).
   EXPECT_LT(largest, 2 * bound);
-  std::printf("error bound %.4f m: %zu -> %zu faces, largest distance of an input vertex %.5f m\n", bound,
-              sphere.triangle_count(), out.triangle_count(), largest);
+  std::printf("error bound %.4f m: %zu -> %zu faces, largest distance of an input vertex %.5f m\n", bound, sphere.triangle_count(),
+              out.triangle_count(), largest);
 }
 
 TEST(Clean, EveryOperationCanBeSwitchedOff) {
@@ -314,7 +315,7 @@ TEST(Clean, EveryOperationCanBeSwitchedOff) {
     EXPECT_TRUE(rotated) << f;
   }
   EXPECT_GT(r.report.after.boundary_edges, 0u);
-  EXPECT_FALSE(r.report.warnings.empty());  // "not closed"
+  EXPECT_FALSE(r.report.warnings.empty());    // "not closed"
   EXPECT_EQ(r.report.operations.size(), 1u);  // only loading
 }
 
@@ -444,8 +445,8 @@ self_intersections = "remove"
   EXPECT_EQ(scene.cleanup.self_intersections, io::SelfIntersections::kRemove);
   EXPECT_TRUE(scene.cleanup.fill_holes);  // default kept
 
-  for (const char* bad : {"[clean]\ndecimate_ratio = 1.5\n", "[clean]\nsmooth = \"laplace\"\n",
-                          "[clean]\nmax_hole_edges = 2\n", "[clean]\ndecimat = true\n"}) {
+  for (const char* bad : {"[clean]\ndecimate_ratio = 1.5\n", "[clean]\nsmooth = \"laplace\"\n", "[clean]\nmax_hole_edges = 2\n",
+                          "[clean]\ndecimat = true\n"}) {
     try {
       io::ParseScene(bad, "clean.toml");
       ADD_FAILURE() << "accepted " << bad;

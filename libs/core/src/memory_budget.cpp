@@ -119,8 +119,7 @@ std::optional<MemoryBudget> AvailableMemory() {
     std::uint64_t kib = 0;
     if (fields >> key >> kib && key == "MemAvailable:") result = MemoryBudget{kib * 1024, "MemAvailable"};
   }
-  if (const auto room = CgroupRoom(); room && (!result || *room < result->bytes))
-    result = MemoryBudget{*room, "cgroup memory limit"};
+  if (const auto room = CgroupRoom(); room && (!result || *room < result->bytes)) result = MemoryBudget{*room, "cgroup memory limit"};
   return result;
 }
 
@@ -151,7 +150,7 @@ void CheckMemoryBudget(const MemoryBudget& budget, double estimate_bytes, std::s
   const double peak = double(ResidentBytes()) + estimate_bytes;
   if (!(peak > double(budget.bytes))) return;
   throw Error(ExitCode::kOverBudget, fmt::format("needs about {} for {} ({}), budget {} ({})", FormatBytes(peak), driver, context,
-                                           FormatBytes(double(budget.bytes)), budget.source));
+                                                 FormatBytes(double(budget.bytes)), budget.source));
 }
 
 }  // namespace rime

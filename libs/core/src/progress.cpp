@@ -77,11 +77,11 @@ void Progress::Draw(bool final_line) {
     const int filled = static_cast<int>(fraction * kWidth);
     std::string bar(filled, '#');
     bar.resize(kWidth, '.');
-    std::fprintf(stderr, "\r\033[K%s: [%s] %3.0f%% %s  %s%s", log::ProgramName().c_str(), bar.c_str(), fraction * 100,
-                 counts.c_str(), tail.c_str(), final_line ? "\n" : "");
+    std::fprintf(stderr, "\r\033[K%s: [%s] %3.0f%% %s  %s%s", log::ProgramName().c_str(), bar.c_str(), fraction * 100, counts.c_str(),
+                 tail.c_str(), final_line ? "\n" : "");
   } else {
-    std::fprintf(stderr, "%s: %s%s (%s)\n", log::ProgramName().c_str(),
-                 total_ > 0 ? fmt::format("{:.0f}% ", fraction * 100).c_str() : "", counts.c_str(), tail.c_str());
+    std::fprintf(stderr, "%s: %s%s (%s)\n", log::ProgramName().c_str(), total_ > 0 ? fmt::format("{:.0f}% ", fraction * 100).c_str() : "",
+                 counts.c_str(), tail.c_str());
   }
   std::fflush(stderr);
 }

@@ -60,7 +60,7 @@ TEST(SymmetricEigen, FloatReconstructsToRoundingLevel) {
   std::uniform_real_distribution<double> u(0.1, 2);
   for (int trial = 0; trial < 200; ++trial) {
     const double base = u(rng);
-    const Vec3d d = trial % 3 == 0 ? Vec3d{u(rng), u(rng), u(rng)}
+    const Vec3d d = trial % 3 == 0   ? Vec3d{u(rng), u(rng), u(rng)}
                     : trial % 3 == 1 ? Vec3d{base, base, u(rng)}
                                      : Vec3d{base, base * (1 + 1e-4), base * (1 - 1e-4)};
     const Mat3<double> r = RandomRotation(rng);

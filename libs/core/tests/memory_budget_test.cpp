@@ -21,8 +21,8 @@ TEST(MemoryBudget, ParsesSizesAsPowersOf1024) {
 }
 
 TEST(MemoryBudget, RefusesWhatIsNotASize) {
-  for (const char* bad : {"", "G", "-1G", "1..5G", "1.5.G", "4X", "4GiBs", "4 G", "0", "0.1", "1e9", "nan", "inf", "0x10",
-                          "9000000000G", "4BB", "4iG"}) {
+  for (const char* bad :
+       {"", "G", "-1G", "1..5G", "1.5.G", "4X", "4GiBs", "4 G", "0", "0.1", "1e9", "nan", "inf", "0x10", "9000000000G", "4BB", "4iG"}) {
     try {
       ParseByteSize(bad);
       ADD_FAILURE() << "accepted '" << bad << "'";

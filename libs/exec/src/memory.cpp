@@ -20,42 +20,32 @@ void* AllocateBytes(const Device& device, std::size_t bytes) {
 
 void FreeBytes(const Device& device, void* pointer) {
   if (!pointer) return;
-  if (device.is_cuda())
-    cuda_impl::Free(pointer);
-  else
-    std::free(pointer);
+  if (device.is_cuda()) cuda_impl::Free(pointer);
+  else std::free(pointer);
 }
 
 void CopyToDevice(const Device& device, void* dst, const void* src, std::size_t bytes) {
   if (!bytes) return;
-  if (device.is_cuda())
-    cuda_impl::CopyHostToDevice(dst, src, bytes);
-  else
-    std::memcpy(dst, src, bytes);
+  if (device.is_cuda()) cuda_impl::CopyHostToDevice(dst, src, bytes);
+  else std::memcpy(dst, src, bytes);
 }
 
 void CopyToHost(const Device& device, void* dst, const void* src, std::size_t bytes) {
   if (!bytes) return;
-  if (device.is_cuda())
-    cuda_impl::CopyDeviceToHost(dst, src, bytes);
-  else
-    std::memcpy(dst, src, bytes);
+  if (device.is_cuda()) cuda_impl::CopyDeviceToHost(dst, src, bytes);
+  else std::memcpy(dst, src, bytes);
 }
 
 void CopyOnDevice(const Device& device, void* dst, const void* src, std::size_t bytes) {
   if (!bytes) return;
-  if (device.is_cuda())
-    cuda_impl::CopyDeviceToDevice(dst, src, bytes);
-  else
-    std::memmove(dst, src, bytes);
+  if (device.is_cuda()) cuda_impl::CopyDeviceToDevice(dst, src, bytes);
+  else std::memmove(dst, src, bytes);
 }
 
 void FillZero(const Device& device, void* pointer, std::size_t bytes) {
   if (!bytes) return;
-  if (device.is_cuda())
-    cuda_impl::Memset0(pointer, bytes);
-  else
-    std::memset(pointer, 0, bytes);
+  if (device.is_cuda()) cuda_impl::Memset0(pointer, bytes);
+  else std::memset(pointer, 0, bytes);
 }
 
 void Synchronize(const Device& device) {

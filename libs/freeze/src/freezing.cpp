@@ -77,7 +77,8 @@ void ListRows(const exec::Device& device, const Particles<T>& particles, T suppo
   exec::ParallelFor(device, count, kernels::MarkRowless{.list = list, .length = work.row_length.data(), .flags = work.row_flags.data()});
   const Index rowless = exec::ListFlagged(device, work.row_flags, count, slot, work.row_list);
   if (rowless == 0) return;
-  exec::ParallelFor(device, rowless, exec::Gather<std::uint32_t>{list, work.row_list.data(), work.row_list.data()});  // in place: i reads and writes i
+  exec::ParallelFor(device, rowless,
+                    exec::Gather<std::uint32_t>{list, work.row_list.data(), work.row_list.data()});  // in place: i reads and writes i
   work.row_x.resize(rowless);
   exec::ParallelFor(device, rowless, exec::Gather<Vec3<T>>{particles.boundary_x, work.row_list.data(), work.row_x.data()});
   particles.boundary_grid->Query(work.row_x.data(), rowless, support, false, work.new_rows);
@@ -93,9 +94,13 @@ void ListRows(const exec::Device& device, const Particles<T>& particles, T suppo
   work.row_pool.resize(work.row_pool_used + pairs);
   const std::uint32_t* indices = work.row_pool_used == 0 ? work.row_pool.data() : work.new_rows.indices.data();
   exec::ParallelFor(device, rowless,
-                    kernels::StoreRows{.list = work.row_list.data(), .offsets = work.new_rows.offsets.data(), .indices = indices,
-                                       .base = std::uint32_t(work.row_pool_used), .begin = work.row_begin.data(),
-                                       .length = work.row_length.data(), .pool = work.row_pool.data()});
+                    kernels::StoreRows{.list = work.row_list.data(),
+                                       .offsets = work.new_rows.offsets.data(),
+                                       .indices = indices,
+                                       .base = std::uint32_t(work.row_pool_used),
+                                       .begin = work.row_begin.data(),
+                                       .length = work.row_length.data(),
+                                       .pool = work.row_pool.data()});
   work.row_pool_used += pairs;
   work.new_rows.indices.release();  // scratch that may hold a whole listing (or the pool's old storage)
   if (work.row_pool_after_reset == 0 || reset) {
@@ -118,24 +123,34 @@ Index UpdateDiffusionRegion(const exec::Device& device, const Particles<T>& part
   exec::ParallelFor(device, nb, kernels::MarkWet<T>{.film = film.film.data(), .wet = work.wet.data()});
   work.newly_wet.resize(nb);
   work.dried.resize(nb);
-  exec::ParallelFor(device, nb, kernels::WetChanges{.wet = work.wet.data(), .wet_seen = work.wet_seen.data(), .newly_wet = work.newly_wet.data(),
-                                                    .dried = work.dried.data()});
-  const bool rebuild = !work.diffusion_cache_valid || particles.boundary_moves ||
-                       exec::ListFlagged(device, work.dried, nb, slot, work.change_list) > 0;
+  exec::ParallelFor(
+      device, nb,
+      kernels::WetChanges{
+          .wet = work.wet.data(), .wet_seen = work.wet_seen.data(), .newly_wet = work.newly_wet.data(), .dried = work.dried.data()});
+  const bool rebuild =
+      !work.diffusion_cache_valid || particles.boundary_moves || exec::ListFlagged(device, work.dried, nb, slot, work.change_list) > 0;
   if (rebuild) {
     work.region.SetZero();
-    exec::ParallelFor(device, nb, kernels::DilateWet<T>{.grid = grid, .wet = work.wet.data(), .radius = support, .region = work.region.data()});
+    exec::ParallelFor(device, nb,
+                      kernels::DilateWet<T>{.grid = grid, .wet = work.wet.data(), .radius = support, .region = work.region.data()});
     exec::FillValue(device, work.stale, 0, 1u);  // every Laplacian is evaluated anew
     work.film_touched.SetZero();
     work.structure_touched.SetZero();
     work.diffusion_cache_valid = !particles.boundary_moves;
   } else {
     const Index grown = exec::ListFlagged(device, work.newly_wet, nb, slot, work.change_list);
-    exec::ParallelFor(device, grown, kernels::GrowRegion<T>{.grid = grid, .list = work.change_list.data(), .radius = support,
-                                                            .region = work.region.data(), .stale = work.stale.data()});
+    exec::ParallelFor(
+        device, grown,
+        kernels::GrowRegion<T>{
+            .grid = grid, .list = work.change_list.data(), .radius = support, .region = work.region.data(), .stale = work.stale.data()});
     const Index changed = exec::ListFlagged(device, work.structure_touched, nb, slot, work.change_list);
-    exec::ParallelFor(device, changed, kernels::JoinRegion<T>{.grid = grid, .list = work.change_list.data(), .wet = work.wet.data(),
-                                                              .radius = support, .region = work.region.data(), .stale = work.stale.data()});
+    exec::ParallelFor(device, changed,
+                      kernels::JoinRegion<T>{.grid = grid,
+                                             .list = work.change_list.data(),
+                                             .wet = work.wet.data(),
+                                             .radius = support,
+                                             .region = work.region.data(),
+                                             .stale = work.stale.data()});
   }
   return exec::ListFlagged(device, work.region, nb, slot, work.region_list);
 }
@@ -158,17 +173,23 @@ Index EvaluationList(const exec::Device& device, const Particles<T>& particles, 
   if (2 * film_changes >= region) {
     work.film_touched.SetZero();
     work.structure_touched.SetZero();
-    exec::ParallelFor(device, nb, kernels::AddStale{.region = work.region.data(), .stale = work.stale.data(), .evaluate = work.evaluate.data()});
+    exec::ParallelFor(device, nb,
+                      kernels::AddStale{.region = work.region.data(), .stale = work.stale.data(), .evaluate = work.evaluate.data()});
     list = work.region_list.data();
     return region;
   }
   for (DeviceArray<std::uint32_t>* changed : {&work.film_touched, &work.structure_touched}) {
     const Index count = changed == &work.film_touched ? film_changes : exec::ListFlagged(device, *changed, nb, slot, work.change_list);
-    exec::ParallelFor(device, count, kernels::MarkAffected<T>{.grid = grid, .list = work.change_list.data(), .region = work.region.data(),
-                                                              .radius = support, .evaluate = work.evaluate.data()});
+    exec::ParallelFor(device, count,
+                      kernels::MarkAffected<T>{.grid = grid,
+                                               .list = work.change_list.data(),
+                                               .region = work.region.data(),
+                                               .radius = support,
+                                               .evaluate = work.evaluate.data()});
     changed->SetZero();
   }
-  exec::ParallelFor(device, nb, kernels::AddStale{.region = work.region.data(), .stale = work.stale.data(), .evaluate = work.evaluate.data()});
+  exec::ParallelFor(device, nb,
+                    kernels::AddStale{.region = work.region.data(), .stale = work.stale.data(), .evaluate = work.evaluate.data()});
   const Index count = exec::ListFlagged(device, work.evaluate, nb, slot, work.change_list);
   list = work.change_list.data();
   return count;
@@ -197,33 +218,50 @@ Index FreezeStep(const exec::Device& device, const io::Scene& scene, const Parti
   work.boundary_active.resize(nb);
   work.boundary_active.SetZero();
   exec::ParallelFor(device, n,
-                    kernels::MarkContacts<T>{.fb_offsets = particles.fb->offsets.data(), .fb_index = particles.fb->indices.data(),
-                                        .fluid_flag = work.fluid_flag.data(), .boundary_active = work.boundary_active.data()});
+                    kernels::MarkContacts<T>{.fb_offsets = particles.fb->offsets.data(),
+                                             .fb_index = particles.fb->indices.data(),
+                                             .fluid_flag = work.fluid_flag.data(),
+                                             .boundary_active = work.boundary_active.data()});
   const Index active = exec::ListFlagged(device, work.boundary_active, nb, slot, work.active_list);
   work.active_x.resize(active);
   exec::ParallelFor(device, active, exec::Gather<Vec3<T>>{particles.boundary_x, work.active_list.data(), work.active_x.data()});
   particles.fluid_grid->Query(work.active_x.data(), active, support, false, work.bf);
   exec::ParallelFor(device, active,
-                    kernels::MarkFluidFromBoundary{.bf_offsets = work.bf.offsets.data(), .bf_index = work.bf.indices.data(),
-                                                   .fluid_flag = work.fluid_flag.data()});
+                    kernels::MarkFluidFromBoundary{
+                        .bf_offsets = work.bf.offsets.data(), .bf_index = work.bf.indices.data(), .fluid_flag = work.fluid_flag.data()});
 
   // 8a fluid anisotropy, 8b film transfer + 8d growth direction.
   work.fluid_d.resize(n);
   exec::ParallelFor(device, n,
-                    kernels::FluidAnisotropy<T>{.flag = work.fluid_flag.data(), .ff_offsets = particles.ff->offsets.data(),
+                    kernels::FluidAnisotropy<T>{.flag = work.fluid_flag.data(),
+                                                .ff_offsets = particles.ff->offsets.data(),
                                                 .ff_index = particles.ff->indices.data(),
-                                           .x = particles.x, .kernel = kernel, .params = p, .d = work.fluid_d.data()});
+                                                .x = particles.x,
+                                                .kernel = kernel,
+                                                .params = p,
+                                                .d = work.fluid_d.data()});
   exec::ParallelFor(device, active,
-                    kernels::FilmAndGrowth<T>{.active = work.active_list.data(), .bf_offsets = work.bf.offsets.data(),
+                    kernels::FilmAndGrowth<T>{.active = work.active_list.data(),
+                                              .bf_offsets = work.bf.offsets.data(),
                                               .bf_index = work.bf.indices.data(),
-                                         .boundary_x = particles.boundary_x, .boundary_volume = particles.boundary_volume,
-                                         .boundary_phase = particles.boundary_phase, .x = particles.x, .v = particles.v,
-                                         .d = work.fluid_d.data(), .kernel = kernel, .params = p, .dt = T(dt), .film = film.film.data(),
-                                         .growth = film.growth.data(), .growth_valid = film.growth_valid.data(),
-                                         .film_touched = work.film_touched.data()});
+                                              .boundary_x = particles.boundary_x,
+                                              .boundary_volume = particles.boundary_volume,
+                                              .boundary_phase = particles.boundary_phase,
+                                              .x = particles.x,
+                                              .v = particles.v,
+                                              .d = work.fluid_d.data(),
+                                              .kernel = kernel,
+                                              .params = p,
+                                              .dt = T(dt),
+                                              .film = film.film.data(),
+                                              .growth = film.growth.data(),
+                                              .growth_valid = film.growth_valid.data(),
+                                              .film_touched = work.film_touched.data()});
   if (scene.freezing.drying_rate > 0)
-    exec::ParallelFor(device, nb, kernels::DryFilm<T>{.factor = T(std::exp(-scene.freezing.drying_rate * dt)), .film = film.film.data(),
-                                                      .film_touched = work.film_touched.data()});
+    exec::ParallelFor(
+        device, nb,
+        kernels::DryFilm<T>{
+            .factor = T(std::exp(-scene.freezing.drying_rate * dt)), .film = film.film.data(), .film_touched = work.film_touched.data()});
 
   // 8c film diffusion over the wet region and its one-ring. Operator splitting: the diffusion
   // time accumulates until one explicit step of it would use half the stability budget (the
@@ -243,23 +281,30 @@ Index FreezeStep(const exec::Device& device, const io::Scene& scene, const Parti
         const Index count = EvaluationList(device, particles, support, region, work, slot, list);
         ListRows(device, particles, support, list, count, work, slot);
         exec::ParallelFor(device, count,
-                          kernels::FilmLaplacian<T>{.list = list, .x = particles.boundary_x,
+                          kernels::FilmLaplacian<T>{.list = list,
+                                                    .x = particles.boundary_x,
                                                     .rows = {work.row_begin.data(), work.row_length.data(), work.row_pool.data()},
-                                                    .volume = particles.boundary_volume, .film = film.film.data(), .kernel = kernel,
-                                                    .epsilon = T(particles.viscosity_epsilon), .laplacian = work.laplacian.data(),
+                                                    .volume = particles.boundary_volume,
+                                                    .film = film.film.data(),
+                                                    .kernel = kernel,
+                                                    .epsilon = T(particles.viscosity_epsilon),
+                                                    .laplacian = work.laplacian.data(),
                                                     .lambda = work.lambda.data()});
       };
       evaluate();
       work.region_lambda.resize(region);
-      exec::ParallelFor(device, region,
-                        kernels::GatherListed<T>{.list = work.region_list.data(), .values = work.lambda.data(), .out = work.region_lambda.data()});
+      exec::ParallelFor(
+          device, region,
+          kernels::GatherListed<T>{.list = work.region_list.data(), .values = work.lambda.data(), .out = work.region_lambda.data()});
       const double lambda_max = exec::Max(device, work.region_lambda.data(), region);
       const int substeps = std::max(1, int(std::ceil(dt_diffusion * diffusivity * lambda_max)));
       for (int sub = 0; sub < substeps; ++sub) {
         if (sub > 0) evaluate();
         exec::ParallelFor(device, region,
-                          kernels::ApplyFilmDiffusion<T>{.list = work.region_list.data(), .laplacian = work.laplacian.data(),
-                                                         .step = T(dt_diffusion * diffusivity / substeps), .film = film.film.data(),
+                          kernels::ApplyFilmDiffusion<T>{.list = work.region_list.data(),
+                                                         .laplacian = work.laplacian.data(),
+                                                         .step = T(dt_diffusion * diffusivity / substeps),
+                                                         .film = film.film.data(),
                                                          .film_touched = work.film_touched.data()});
       }
     }
@@ -270,16 +315,27 @@ Index FreezeStep(const exec::Device& device, const io::Scene& scene, const Parti
   work.energy_solid.resize(n);
   work.energy_ice.resize(n);
   exec::ParallelFor(device, n,
-                    kernels::PhaseDecision<T>{.fb_offsets = particles.fb->offsets.data(), .fb_index = particles.fb->indices.data(),
+                    kernels::PhaseDecision<T>{.fb_offsets = particles.fb->offsets.data(),
+                                              .fb_index = particles.fb->indices.data(),
                                               .x = particles.x,
-                                         .d = work.fluid_d.data(), .boundary_x = particles.boundary_x, .boundary_phase = particles.boundary_phase,
-                                         .film = film.film.data(), .growth = film.growth.data(), .growth_valid = film.growth_valid.data(),
-                                         .kernel = kernel, .params = p, .decision = work.decision.data(), .trigger = work.trigger.data(),
-                                         .energy_solid = work.energy_solid.data(), .energy_ice = work.energy_ice.data()});
+                                              .d = work.fluid_d.data(),
+                                              .boundary_x = particles.boundary_x,
+                                              .boundary_phase = particles.boundary_phase,
+                                              .film = film.film.data(),
+                                              .growth = film.growth.data(),
+                                              .growth_valid = film.growth_valid.data(),
+                                              .kernel = kernel,
+                                              .params = p,
+                                              .decision = work.decision.data(),
+                                              .trigger = work.trigger.data(),
+                                              .energy_solid = work.energy_solid.data(),
+                                              .energy_ice = work.energy_ice.data()});
   if (clocks)
     exec::ParallelFor(device, n,
-                      kernels::NucleationDelay<T>{.dt = T(dt), .delay = T(scene.freezing.freeze_delay), .decision = work.decision.data(),
-                                             .contact_time = clocks->contact_time.data()});
+                      kernels::NucleationDelay<T>{.dt = T(dt),
+                                                  .delay = T(scene.freezing.freeze_delay),
+                                                  .decision = work.decision.data(),
+                                                  .contact_time = clocks->contact_time.data()});
   exec::ParallelFor(device, n, kernels::KeepUnfrozen{.decision = work.decision.data(), .keep = keep.data(), .frozen = work.frozen.data()});
   return exec::ListFlagged(device, work.frozen, n, slot, frozen_list);
 }
@@ -289,8 +345,8 @@ template FreezeParams<double> MakeFreezeParams<double>(const io::Scene&);
 template Index FreezeStep<float>(const exec::Device&, const io::Scene&, const Particles<float>&, double, double&, FreezingBoundary<float>&,
                                  FreezingFluid<float>*, FreezingWork<float>&, DeviceArray<std::uint32_t>&, DeviceArray<std::uint32_t>&,
                                  DeviceArray<std::uint32_t>&);
-template Index FreezeStep<double>(const exec::Device&, const io::Scene&, const Particles<double>&, double, double&, FreezingBoundary<double>&,
-                                  FreezingFluid<double>*, FreezingWork<double>&, DeviceArray<std::uint32_t>&, DeviceArray<std::uint32_t>&,
-                                  DeviceArray<std::uint32_t>&);
+template Index FreezeStep<double>(const exec::Device&, const io::Scene&, const Particles<double>&, double, double&,
+                                  FreezingBoundary<double>&, FreezingFluid<double>*, FreezingWork<double>&, DeviceArray<std::uint32_t>&,
+                                  DeviceArray<std::uint32_t>&, DeviceArray<std::uint32_t>&);
 
 }  // namespace rime::freeze

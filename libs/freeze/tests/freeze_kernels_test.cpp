@@ -66,10 +66,12 @@ TEST(FreezeKernels, FilmDiffusionConservesAndKeepsBounds) {
   for (double f : film) before += f;
   const double diffusivity = 0.15 * kDp * kDp / 0.006, dt = 0.006;
   for (int step = 0; step < 20; ++step) {
-    exec::cpu::ParallelFor(nb, kernels::FilmLaplacian<double>{list.data(), dx.data(), rows, dvol.data(), dfilm.data(), kernel, 0.01, lap.data(), lambda.data()});
+    exec::cpu::ParallelFor(nb, kernels::FilmLaplacian<double>{list.data(), dx.data(), rows, dvol.data(), dfilm.data(), kernel, 0.01,
+                                                              lap.data(), lambda.data()});
     const double lambda_max = *std::max_element(lambda.data(), lambda.data() + nb);
     ASSERT_LE(dt * diffusivity * lambda_max, 1.0) << "default diffusion must need no sub-stepping at dt_ref (spec §9.3)";
-    exec::cpu::ParallelFor(nb, kernels::ApplyFilmDiffusion<double>{list.data(), lap.data(), dt * diffusivity, dfilm.data(), touched.data()});
+    exec::cpu::ParallelFor(nb,
+                           kernels::ApplyFilmDiffusion<double>{list.data(), lap.data(), dt * diffusivity, dfilm.data(), touched.data()});
   }
   const auto after = dfilm.ToHost();
   double sum = 0;
@@ -104,9 +106,9 @@ TEST(FreezeKernels, TransferIsBoundedAndMonotone) {
   std::vector<std::uint32_t> offsets{0, std::uint32_t(n)}, index(n);
   for (Index j = 0; j < n; ++j) index[j] = std::uint32_t(j);
   DeviceArray<std::uint32_t> doff(cpu, offsets), dind(cpu, index), active(cpu, std::vector<std::uint32_t>{0});
-  const kernels::FilmAndGrowth<double> k{active.data(), doff.data(), dind.data(), bx.data(), bvol.data(), phase.data(), fx.data(), fv.data(),
-                                         dd.data(), CubicSpline<double>(kH), Params(), 0.006, film.data(), growth.data(), valid.data(),
-                                         touched.data()};
+  const kernels::FilmAndGrowth<double> k{
+      active.data(),           doff.data(), dind.data(), bx.data(),   bvol.data(),   phase.data(), fx.data(),     fv.data(), dd.data(),
+      CubicSpline<double>(kH), Params(),    0.006,       film.data(), growth.data(), valid.data(), touched.data()};
   double last = 0;
   for (int step = 0; step < 10; ++step) {
     touched.SetZero();
@@ -151,7 +153,7 @@ TEST(FreezeKernels, TipGrowthFavoursWaterBelowTheTip) {
   p.growth_sign = -1;
   p.fr_clamp = true;
   const Vec3d downward_flow{0, 0, -1};
-  const Vec3d below_tip{0, 0, 0.01};                                    // x_b − x_j: water under b
+  const Vec3d below_tip{0, 0, 0.01};                                            // x_b − x_j: water under b
   const Vec3d beside{0.01 * std::sin(M_PI / 3), 0, 0.01 * std::cos(M_PI / 3)};  // 60° off the vertical
   EXPECT_NEAR(kernels::FreezingFraction(downward_flow, true, beside, p, true), 0.5, 1e-12) << "n = 1 is Eq. 31";
   p.tip_growth = 4;
@@ -191,10 +193,21 @@ TEST(FreezeKernels, FreezingFractionAndEnergy) {
   DeviceArray<double> es(cpu, 1), ei(cpu, 1);
   for (const auto& films : {std::vector<double>{0, 0, 0}, std::vector<double>{0, 1, 0}, std::vector<double>{1, 1, 1}}) {
     DeviceArray<double> film(cpu, films);
-    kernels::PhaseDecision<double>{.fb_offsets = off.data(), .fb_index = ind.data(), .x = fx.data(), .d = dd.data(), .boundary_x = bx.data(),
-                                   .boundary_phase = phase.data(), .film = film.data(), .growth = growth.data(), .growth_valid = valid.data(),
-                                   .kernel = CubicSpline<double>(kH), .params = p,
-                                   .decision = decision.data(), .trigger = trigger.data(), .energy_solid = es.data(), .energy_ice = ei.data()}(0);
+    kernels::PhaseDecision<double>{.fb_offsets = off.data(),
+                                   .fb_index = ind.data(),
+                                   .x = fx.data(),
+                                   .d = dd.data(),
+                                   .boundary_x = bx.data(),
+                                   .boundary_phase = phase.data(),
+                                   .film = film.data(),
+                                   .growth = growth.data(),
+                                   .growth_valid = valid.data(),
+                                   .kernel = CubicSpline<double>(kH),
+                                   .params = p,
+                                   .decision = decision.data(),
+                                   .trigger = trigger.data(),
+                                   .energy_solid = es.data(),
+                                   .energy_ice = ei.data()}(0);
     if (films[0] == 0 && films[2] == 0) {
       EXPECT_EQ(es.ToHost()[0], 0.0) << "no film or out of support: no energy";
       EXPECT_EQ(ei.ToHost()[0], 0.0);

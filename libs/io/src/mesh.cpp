@@ -179,12 +179,10 @@ enum class PlyType { kInt8, kUint8, kInt16, kUint16, kInt32, kUint32, kFloat32, 
 
 bool ParsePlyType(std::string_view name, PlyType& type) {
   static const std::pair<std::string_view, PlyType> kNames[] = {
-      {"char", PlyType::kInt8},     {"int8", PlyType::kInt8},       {"uchar", PlyType::kUint8},
-      {"uint8", PlyType::kUint8},   {"short", PlyType::kInt16},     {"int16", PlyType::kInt16},
-      {"ushort", PlyType::kUint16}, {"uint16", PlyType::kUint16},   {"int", PlyType::kInt32},
-      {"int32", PlyType::kInt32},   {"uint", PlyType::kUint32},     {"uint32", PlyType::kUint32},
-      {"float", PlyType::kFloat32}, {"float32", PlyType::kFloat32}, {"double", PlyType::kFloat64},
-      {"float64", PlyType::kFloat64}};
+      {"char", PlyType::kInt8},     {"int8", PlyType::kInt8},       {"uchar", PlyType::kUint8},    {"uint8", PlyType::kUint8},
+      {"short", PlyType::kInt16},   {"int16", PlyType::kInt16},     {"ushort", PlyType::kUint16},  {"uint16", PlyType::kUint16},
+      {"int", PlyType::kInt32},     {"int32", PlyType::kInt32},     {"uint", PlyType::kUint32},    {"uint32", PlyType::kUint32},
+      {"float", PlyType::kFloat32}, {"float32", PlyType::kFloat32}, {"double", PlyType::kFloat64}, {"float64", PlyType::kFloat64}};
   for (const auto& [n, t] : kNames)
     if (n == name) {
       type = t;
@@ -195,24 +193,64 @@ bool ParsePlyType(std::string_view name, PlyType& type) {
 
 std::size_t PlyTypeSize(PlyType t) {
   switch (t) {
-    case PlyType::kInt8: case PlyType::kUint8: return 1;
-    case PlyType::kInt16: case PlyType::kUint16: return 2;
-    case PlyType::kInt32: case PlyType::kUint32: case PlyType::kFloat32: return 4;
-    case PlyType::kFloat64: return 8;
+    case PlyType::kInt8:
+    case PlyType::kUint8:
+      return 1;
+    case PlyType::kInt16:
+    case PlyType::kUint16:
+      return 2;
+    case PlyType::kInt32:
+    case PlyType::kUint32:
+    case PlyType::kFloat32:
+      return 4;
+    case PlyType::kFloat64:
+      return 8;
   }
   return 0;
 }
 
 double ReadBinary(const char* p, PlyType t) {
   switch (t) {
-    case PlyType::kInt8: { std::int8_t v; std::memcpy(&v, p, 1); return v; }
-    case PlyType::kUint8: { std::uint8_t v; std::memcpy(&v, p, 1); return v; }
-    case PlyType::kInt16: { std::int16_t v; std::memcpy(&v, p, 2); return v; }
-    case PlyType::kUint16: { std::uint16_t v; std::memcpy(&v, p, 2); return v; }
-    case PlyType::kInt32: { std::int32_t v; std::memcpy(&v, p, 4); return v; }
-    case PlyType::kUint32: { std::uint32_t v; std::memcpy(&v, p, 4); return v; }
-    case PlyType::kFloat32: { float v; std::memcpy(&v, p, 4); return v; }
-    case PlyType::kFloat64: { double v; std::memcpy(&v, p, 8); return v; }
+    case PlyType::kInt8: {
+      std::int8_t v;
+      std::memcpy(&v, p, 1);
+      return v;
+    }
+    case PlyType::kUint8: {
+      std::uint8_t v;
+      std::memcpy(&v, p, 1);
+      return v;
+    }
+    case PlyType::kInt16: {
+      std::int16_t v;
+      std::memcpy(&v, p, 2);
+      return v;
+    }
+    case PlyType::kUint16: {
+      std::uint16_t v;
+      std::memcpy(&v, p, 2);
+      return v;
+    }
+    case PlyType::kInt32: {
+      std::int32_t v;
+      std::memcpy(&v, p, 4);
+      return v;
+    }
+    case PlyType::kUint32: {
+      std::uint32_t v;
+      std::memcpy(&v, p, 4);
+      return v;
+    }
+    case PlyType::kFloat32: {
+      float v;
+      std::memcpy(&v, p, 4);
+      return v;
+    }
+    case PlyType::kFloat64: {
+      double v;
+      std::memcpy(&v, p, 8);
+      return v;
+    }
   }
   return 0;
 }

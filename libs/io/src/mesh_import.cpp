@@ -23,14 +23,13 @@ std::vector<TriMesh> ReadParts(const std::filesystem::path& path, ImportStats* s
   Assimp::Importer importer;
   const std::string extension = path.extension().string();
   if (extension.empty() || !importer.IsExtensionSupported(extension))
-    throw InputError(fmt::format("unsupported mesh format '{}' (OBJ, PLY, STL, glTF/GLB, FBX and the other formats assimp reads)",
-                                 extension),
-                     where);
+    throw InputError(
+        fmt::format("unsupported mesh format '{}' (OBJ, PLY, STL, glTF/GLB, FBX and the other formats assimp reads)", extension), where);
   // Points and lines are dropped; polygons become triangles; the node hierarchy is baked in.
   importer.SetPropertyInteger(AI_CONFIG_PP_SBP_REMOVE, aiPrimitiveType_POINT | aiPrimitiveType_LINE);
   importer.SetPropertyBool(AI_CONFIG_PP_PTV_KEEP_HIERARCHY, true);  // bake transforms, keep meshes apart
-  const aiScene* scene = importer.ReadFile(path.string(), aiProcess_Triangulate | aiProcess_JoinIdenticalVertices |
-                                                              aiProcess_SortByPType | aiProcess_PreTransformVertices);
+  const aiScene* scene = importer.ReadFile(
+      path.string(), aiProcess_Triangulate | aiProcess_JoinIdenticalVertices | aiProcess_SortByPType | aiProcess_PreTransformVertices);
   if (scene == nullptr) {
     // Post-processing refuses files without faces; read again without it to tell "no triangles"
     // apart from a file assimp cannot parse.

@@ -54,13 +54,32 @@ struct SilenceHdf5 {
 };
 const SilenceHdf5 g_silence;
 
-template <class T> hid_t NativeType();
-template <> hid_t NativeType<float>() { return H5T_NATIVE_FLOAT; }
-template <> hid_t NativeType<double>() { return H5T_NATIVE_DOUBLE; }
-template <> hid_t NativeType<std::int32_t>() { return H5T_NATIVE_INT32; }
-template <> hid_t NativeType<std::uint32_t>() { return H5T_NATIVE_UINT32; }
-template <> hid_t NativeType<std::int64_t>() { return H5T_NATIVE_INT64; }
-template <> hid_t NativeType<std::uint8_t>() { return H5T_NATIVE_UINT8; }
+template <class T>
+hid_t NativeType();
+template <>
+hid_t NativeType<float>() {
+  return H5T_NATIVE_FLOAT;
+}
+template <>
+hid_t NativeType<double>() {
+  return H5T_NATIVE_DOUBLE;
+}
+template <>
+hid_t NativeType<std::int32_t>() {
+  return H5T_NATIVE_INT32;
+}
+template <>
+hid_t NativeType<std::uint32_t>() {
+  return H5T_NATIVE_UINT32;
+}
+template <>
+hid_t NativeType<std::int64_t>() {
+  return H5T_NATIVE_INT64;
+}
+template <>
+hid_t NativeType<std::uint8_t>() {
+  return H5T_NATIVE_UINT8;
+}
 
 void Check(herr_t status, const std::string& what, const fs::path& file) {
   if (status >= 0) return;
@@ -91,8 +110,7 @@ void WriteStringAttribute(hid_t object, const char* name, const std::string& val
 }
 
 template <class T>
-void WriteDataset(hid_t group, const std::string& name, const std::vector<T>& values, const WriteOptions& options,
-                  const fs::path& file) {
+void WriteDataset(hid_t group, const std::string& name, const std::vector<T>& values, const WriteOptions& options, const fs::path& file) {
   const hsize_t n = values.size();
   Handle space(H5Screate_simple(1, &n, nullptr), H5Sclose);
   Handle properties(H5Pcreate(H5P_DATASET_CREATE), H5Pclose);
@@ -124,8 +142,7 @@ double ReadNumberAttribute(hid_t object, const char* name, const fs::path& file)
   double value = 0;
   if (!attr.valid()) throw InputError(fmt::format("missing attribute '{}'", name), file.string());
   RequireScalar(attr, name, file);
-  if (H5Aread(attr, H5T_NATIVE_DOUBLE, &value) < 0)
-    throw InputError(fmt::format("unreadable attribute '{}'", name), file.string());
+  if (H5Aread(attr, H5T_NATIVE_DOUBLE, &value) < 0) throw InputError(fmt::format("unreadable attribute '{}'", name), file.string());
   return value;
 }
 
@@ -184,8 +201,7 @@ Handle OpenChecked(const fs::path& path) {
 }
 
 void ReadHeader(hid_t file, const fs::path& path, std::string_view expected_kind, ParticleFrame& frame) {
-  if (!HasAttribute(file, "format"))
-    throw InputError("not a Rime particle file (no 'format' attribute)", path.string());
+  if (!HasAttribute(file, "format")) throw InputError("not a Rime particle file (no 'format' attribute)", path.string());
   const std::string format = ReadStringAttribute(file, "format", path);
   if (format != kParticleFormatName)
     throw InputError(fmt::format("wrong format '{}' (expected '{}')", format, kParticleFormatName), path.string());
@@ -219,10 +235,8 @@ void ReadHeader(hid_t file, const fs::path& path, std::string_view expected_kind
     Handle attr(H5Aopen(file, name, H5P_DEFAULT), H5Aclose);
     if (!attr.valid()) throw InputError(fmt::format("unreadable attribute '{}' (corrupt file)", name), path.string());
     Handle type(H5Aget_type(attr), H5Tclose);
-    if (H5Tget_class(type) == H5T_STRING)
-      frame.texts[name] = ReadStringAttribute(file, name, path);
-    else
-      frame.numbers[name] = ReadNumberAttribute(file, name, path);
+    if (H5Tget_class(type) == H5T_STRING) frame.texts[name] = ReadStringAttribute(file, name, path);
+    else frame.numbers[name] = ReadNumberAttribute(file, name, path);
   }
 }
 
@@ -257,20 +271,14 @@ ParticleFrame Read(const fs::path& path, std::string_view expected_kind, bool wi
     if (n > 0 && (bytes == 0 || H5Dget_storage_size(dataset) == 0 || double(n) * double(bytes) > most))
       throw InputError(fmt::format("dataset 'Step#0/{}' claims {} values, more than the file holds (corrupt file)", name, n),
                        path.string());
-    if (type_class == H5T_FLOAT && bytes == 4)
-      frame.attributes[name] = ReadDataset<float>(dataset, n, name, path);
-    else if (type_class == H5T_FLOAT && bytes == 8)
-      frame.attributes[name] = ReadDataset<double>(dataset, n, name, path);
-    else if (type_class == H5T_INTEGER && bytes == 1)
-      frame.attributes[name] = ReadDataset<std::uint8_t>(dataset, n, name, path);
+    if (type_class == H5T_FLOAT && bytes == 4) frame.attributes[name] = ReadDataset<float>(dataset, n, name, path);
+    else if (type_class == H5T_FLOAT && bytes == 8) frame.attributes[name] = ReadDataset<double>(dataset, n, name, path);
+    else if (type_class == H5T_INTEGER && bytes == 1) frame.attributes[name] = ReadDataset<std::uint8_t>(dataset, n, name, path);
     else if (type_class == H5T_INTEGER && bytes == 4 && is_signed)
       frame.attributes[name] = ReadDataset<std::int32_t>(dataset, n, name, path);
-    else if (type_class == H5T_INTEGER && bytes == 4)
-      frame.attributes[name] = ReadDataset<std::uint32_t>(dataset, n, name, path);
-    else if (type_class == H5T_INTEGER && bytes == 8)
-      frame.attributes[name] = ReadDataset<std::int64_t>(dataset, n, name, path);
-    else
-      throw InputError(fmt::format("dataset 'Step#0/{}' has an unsupported element type", name), path.string());
+    else if (type_class == H5T_INTEGER && bytes == 4) frame.attributes[name] = ReadDataset<std::uint32_t>(dataset, n, name, path);
+    else if (type_class == H5T_INTEGER && bytes == 8) frame.attributes[name] = ReadDataset<std::int64_t>(dataset, n, name, path);
+    else throw InputError(fmt::format("dataset 'Step#0/{}' has an unsupported element type", name), path.string());
   }
   frame.Validate();
   return frame;
@@ -358,8 +366,7 @@ std::vector<Vec3<T>> ParticleFrame::GetPositions() const {
   return out;
 }
 
-#define RIME_INSTANTIATE(T)                                                                   \
-  template const std::vector<T>& ParticleFrame::Get<T>(const std::string&) const;
+#define RIME_INSTANTIATE(T) template const std::vector<T>& ParticleFrame::Get<T>(const std::string&) const;
 RIME_INSTANTIATE(float)
 RIME_INSTANTIATE(double)
 RIME_INSTANTIATE(std::int32_t)
@@ -414,9 +421,7 @@ void WriteParticleFrame(const fs::path& path, const ParticleFrame& frame, const 
 }
 
 ParticleFrame ReadParticleFrame(const fs::path& path, std::string_view expected_kind) { return Read(path, expected_kind, true); }
-ParticleFrame ReadParticleFrameHeader(const fs::path& path, std::string_view expected_kind) {
-  return Read(path, expected_kind, false);
-}
+ParticleFrame ReadParticleFrameHeader(const fs::path& path, std::string_view expected_kind) { return Read(path, expected_kind, false); }
 
 void WriteSequenceIndex(const fs::path& index_path, const std::vector<IndexEntry>& entries) {
   AtomicFile atomic(index_path);
@@ -428,9 +433,8 @@ void WriteSequenceIndex(const fs::path& index_path, const std::vector<IndexEntry
     WriteNumberAttribute(file, "version", H5T_NATIVE_DOUBLE, &version, index_path);
     const fs::path base = index_path.parent_path();
     for (std::size_t k = 0; k < entries.size(); ++k) {
-      const fs::path relative = entries[k].frame_file.is_absolute() && !base.empty()
-                                    ? fs::relative(entries[k].frame_file, base)
-                                    : entries[k].frame_file.filename();
+      const fs::path relative = entries[k].frame_file.is_absolute() && !base.empty() ? fs::relative(entries[k].frame_file, base)
+                                                                                     : entries[k].frame_file.filename();
       const std::string link = fmt::format("Step#{}", k);
       Check(H5Lcreate_external(relative.c_str(), "/Step#0", file, link.c_str(), H5P_DEFAULT, H5P_DEFAULT), link, index_path);
     }

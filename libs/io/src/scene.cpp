@@ -52,7 +52,8 @@ void CheckParticleCount(TomlReader& t, const std::string& key, double volume, do
   const double count = volume / (spacing * spacing * spacing);
   if (!(count <= kMaxSceneParticles))
     t.Fail(key, fmt::format("{} would hold about {:.3g} particles at [water] spacing {:g} m, more than {:g} (use a larger "
-                            "spacing or a smaller {})", what, count, spacing, kMaxSceneParticles, what));
+                            "spacing or a smaller {})",
+                            what, count, spacing, kMaxSceneParticles, what));
 }
 
 FluidBlock ParseBlock(TomlReader& t, double spacing) {
@@ -128,8 +129,7 @@ Scene ParseScene(const std::string& text, const fs::path& file) {
   try {
     root = toml::parse(text, name);
   } catch (const toml::parse_error& e) {
-    throw InputError(fmt::format("TOML syntax error: {}", e.description()),
-                     fmt::format("{}:{}", name, e.source().begin.line));
+    throw InputError(fmt::format("TOML syntax error: {}", e.description()), fmt::format("{}:{}", name, e.source().begin.line));
   }
   Scene scene;
   scene.file = file;
@@ -147,8 +147,8 @@ Scene ParseScene(const std::string& text, const fs::path& file) {
     LoadSettings(t, scene.info);
     FileNameSafe(t, "name", scene.info.name);
     if (!(scene.info.end_time * scene.info.fps <= double(kMaxSceneFrames)))
-      t.Fail("end_time", fmt::format("end_time {:g} s at {:g} fps makes {:.3g} frames, more than {}", scene.info.end_time,
-                                     scene.info.fps, scene.info.end_time * scene.info.fps, kMaxSceneFrames));
+      t.Fail("end_time", fmt::format("end_time {:g} s at {:g} fps makes {:.3g} frames, more than {}", scene.info.end_time, scene.info.fps,
+                                     scene.info.end_time * scene.info.fps, kMaxSceneFrames));
     t.RejectUnknownKeys();
   }
   ApplyQualityPreset(scene.info.quality, scene);
@@ -218,8 +218,7 @@ Scene ParseScene(const std::string& text, const fs::path& file) {
       if (scene.solids[a].name == scene.solids[b].name)
         throw InputError(fmt::format("two solids are named '{}'", scene.solids[a].name), name + ": solid.name");
   for (TomlReader& t : top.TableArray("water_block")) scene.fluid_blocks.push_back(ParseBlock(t, scene.fluid.spacing));
-  for (TomlReader& t : top.TableArray("emitter"))
-    scene.emitters.push_back(ParseEmitter(t, scene.fluid.spacing, scene.info.end_time));
+  for (TomlReader& t : top.TableArray("emitter")) scene.emitters.push_back(ParseEmitter(t, scene.fluid.spacing, scene.info.end_time));
   {
     TomlReader t = top.Table("surface");
     ParseSurfaceSettings(t, scene.surface);

@@ -38,14 +38,12 @@ std::string MarkdownTable() {
   Settings::Visit(defaults, [&](const Param& p, const auto& value) {
     const std::string meaning = p.doc.empty() ? std::string(p.help) : fmt::format("{} {}", p.help, p.doc);
     out += fmt::format("| `{}` | {} | {} | {} | {} |\n", p.name, p.unit,
-                       p.default_doc.empty() ? FormatValue(value) : std::string(p.default_doc), DescribeAccepted(p, value),
-                       meaning);
+                       p.default_doc.empty() ? FormatValue(value) : std::string(p.default_doc), DescribeAccepted(p, value), meaning);
   });
   return out;
 }
 
-constexpr std::string_view kFlagTableHeader =
-    "| flag | scene key | default | accepted | meaning |\n|---|---|---|---|---|\n";
+constexpr std::string_view kFlagTableHeader = "| flag | scene key | default | accepted | meaning |\n|---|---|---|---|---|\n";
 
 // Rows of a markdown table (kFlagTableHeader) of the command-line flags a settings struct declares.
 template <class Settings>
@@ -64,8 +62,8 @@ std::string FlagRows() {
     }
     // A default in words ("0 (= use the ratio)") stands without the unit.
     const std::string shown = !p.default_doc.empty() ? std::string(p.default_doc)
-                              : p.unit.empty()        ? FormatValue(value)
-                                                      : fmt::format("{} {}", FormatValue(value), p.unit);
+                              : p.unit.empty()       ? FormatValue(value)
+                                                     : fmt::format("{} {}", FormatValue(value), p.unit);
     out += fmt::format("| {} | `{}` | {} | {} | {} |\n", flags, p.name, shown, DescribeAccepted(p, value), p.help);
   });
   return out;

@@ -40,12 +40,12 @@ void CheckTomlLimits(std::string_view text, const std::string& file) {
   std::vector<Open> open;
   const std::size_t n = text.size();
   std::size_t line = 1;
-  int table_depth = 0;      // depth of the current [table] or [[array]]
-  std::string table_name;   // its name, for messages
-  bool in_key = true;       // reading a key: at a statement start, after '{', or after ',' in an inline table
-  int key_segments = 0;     // dots read in the current key
-  int value_depth = 0;      // depth of the value being read
-  std::string key;          // the current key as written, for messages
+  int table_depth = 0;     // depth of the current [table] or [[array]]
+  std::string table_name;  // its name, for messages
+  bool in_key = true;      // reading a key: at a statement start, after '{', or after ',' in an inline table
+  int key_segments = 0;    // dots read in the current key
+  int value_depth = 0;     // depth of the value being read
+  std::string key;         // the current key as written, for messages
   const auto fail = [&](const std::string& what, std::size_t at_line) {
     const std::string field = table_name.empty() ? key : (key.empty() ? table_name : table_name + "." + key);
     throw InputError(what, fmt::format("{}:{}: {}", file, at_line, field.empty() ? "(top level)" : field));
@@ -284,8 +284,7 @@ void TomlReader::RejectUnknownKeys() const {
     const std::string name(key.str());
     if (!used_.count(name)) {
       const auto line = node.source().begin.line;
-      throw InputError(fmt::format("unknown key '{}' (misspelled?)", name),
-                       fmt::format("{}:{}: {}", file_, line, FieldPath(name)));
+      throw InputError(fmt::format("unknown key '{}' (misspelled?)", name), fmt::format("{}:{}: {}", file_, line, FieldPath(name)));
     }
   }
 }

@@ -20,7 +20,6 @@ fs::path TempDir() {
   return dir;
 }
 
-
 /// Runs ReadMesh and returns the error text (fails the test if it succeeds) and the exit code.
 std::pair<std::string, ExitCode> ReadError(const fs::path& path) {
   try {
@@ -96,13 +95,13 @@ TEST(Mesh, EmptyMeshGivesValidEmptyFile) {
 TEST(Mesh, ObjPolygonsCornerFormsAndNegativeIndices) {
   const fs::path path = TempDir() / "quad.obj";
   test::WriteFile(path,
-            "# a quad and a pentagon\n"
-            "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv +2 0.5 -1e-1\n"
-            "vt 0 0\nvn 0 0 1\nvn 0 0 -1\n"
-            "o thing\ng group\ns off\n"
-            "f 1/1/1 2/1/1 3/1/1 4/1/1\n"
-            "f -5//2 -4//2 -3//2 -2//2 -1//2\n"
-            "f 1/1 2/1 5/1\n");
+                  "# a quad and a pentagon\n"
+                  "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv +2 0.5 -1e-1\n"
+                  "vt 0 0\nvn 0 0 1\nvn 0 0 -1\n"
+                  "o thing\ng group\ns off\n"
+                  "f 1/1/1 2/1/1 3/1/1 4/1/1\n"
+                  "f -5//2 -4//2 -3//2 -2//2 -1//2\n"
+                  "f 1/1 2/1 5/1\n");
   const TriMesh m = ReadMesh(path);
   ASSERT_EQ(m.vertex_count(), 5u);
   EXPECT_EQ(m.positions[4], Vec3f(2, 0.5f, -0.1f));
@@ -118,15 +117,15 @@ TEST(Mesh, ObjPolygonsCornerFormsAndNegativeIndices) {
 TEST(Mesh, AsciiPlyWithQuadsAndExtraProperties) {
   const fs::path path = TempDir() / "ascii.ply";
   test::WriteFile(path,
-            "ply\nformat ascii 1.0\ncomment made by hand\n"
-            "element vertex 4\nproperty double x\nproperty double y\nproperty double z\n"
-            "property uchar red\nproperty float vx\nproperty float vy\nproperty float vz\n"
-            "element face 1\nproperty list uchar uint vertex_indices\nproperty int flags\n"
-            "element edge 1\nproperty int vertex1\nproperty int vertex2\n"
-            "end_header\n"
-            "0 0 0 255 1 0 0\n1 0 0 0 2 0 0\n1 1 0 0 3 0 0\n0 1 0 0 4 0 0\n"
-            "4 0 1 2 3 7\n"
-            "0 1\n");
+                  "ply\nformat ascii 1.0\ncomment made by hand\n"
+                  "element vertex 4\nproperty double x\nproperty double y\nproperty double z\n"
+                  "property uchar red\nproperty float vx\nproperty float vy\nproperty float vz\n"
+                  "element face 1\nproperty list uchar uint vertex_indices\nproperty int flags\n"
+                  "element edge 1\nproperty int vertex1\nproperty int vertex2\n"
+                  "end_header\n"
+                  "0 0 0 255 1 0 0\n1 0 0 0 2 0 0\n1 1 0 0 3 0 0\n0 1 0 0 4 0 0\n"
+                  "4 0 1 2 3 7\n"
+                  "0 1\n");
   const TriMesh m = ReadMesh(path);
   ASSERT_EQ(m.vertex_count(), 4u);
   ASSERT_EQ(m.triangle_count(), 2u);
@@ -171,8 +170,8 @@ TEST(Mesh, IndexOutOfRange) {
 
   const fs::path ply = TempDir() / "range.ply";
   test::WriteFile(ply,
-            "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
-            "element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 3\n");
+                  "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+                  "element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 3\n");
   std::tie(what, code) = ReadError(ply);
   EXPECT_EQ(code, ExitCode::kBadInput);
   EXPECT_NE(what.find("face 0"), std::string::npos) << what;

@@ -45,8 +45,9 @@ void ExpectRangesEnforced(const std::string& section, const std::string& preambl
     if constexpr (std::is_arithmetic_v<T> && !std::is_same_v<T, bool>) {
       const bool integer = std::is_integral_v<T>;
       std::string below;
-      if (p.range.min > -1e299) below = integer ? fmt::format("{}", (long long)(std::floor(p.range.min)) - (p.range.min_exclusive ? 0 : 1))
-                                                : fmt::format("{}", p.range.min_exclusive ? p.range.min : p.range.min - 1);
+      if (p.range.min > -1e299)
+        below = integer ? fmt::format("{}", (long long)(std::floor(p.range.min)) - (p.range.min_exclusive ? 0 : 1))
+                        : fmt::format("{}", p.range.min_exclusive ? p.range.min : p.range.min - 1);
       if (below.empty()) return;
       const std::string text = fmt::format("{}[{}]\n{} = {}\n", preamble, section, p.name, below);
       try {
@@ -62,8 +63,7 @@ void ExpectRangesEnforced(const std::string& section, const std::string& preambl
 }
 
 TEST(SceneReference, LoaderEnforcesEveryDeclaredLowerBound) {
-  const std::string all_modules =
-      "[sim]\nmodules = [\"gravity\", \"viscosity\", \"surface_tension\", \"air_pressure\", \"freezing\"]\n";
+  const std::string all_modules = "[sim]\nmodules = [\"gravity\", \"viscosity\", \"surface_tension\", \"air_pressure\", \"freezing\"]\n";
   ExpectRangesEnforced<SceneInfo>("scene", "");
   ExpectRangesEnforced<FluidSettings>("water", "");
   ExpectRangesEnforced<ViscositySettings>("viscosity", all_modules);
@@ -75,9 +75,10 @@ TEST(SceneReference, LoaderEnforcesEveryDeclaredLowerBound) {
 }
 
 TEST(SceneReference, StringOptionsBecomeEnumsAndUnknownNamesAreRefused) {
-  const Scene s = ParseScene("[sim]\nmodules = [\"gravity\", \"freezing\"]\ntime_step = \"fixed\"\n"
-                             "[freezing]\nfr_mode = \"map\"\nce_aggregation = \"sum\"\n[clean]\nsmooth = \"none\"\n",
-                             "enums.toml");
+  const Scene s = ParseScene(
+      "[sim]\nmodules = [\"gravity\", \"freezing\"]\ntime_step = \"fixed\"\n"
+      "[freezing]\nfr_mode = \"map\"\nce_aggregation = \"sum\"\n[clean]\nsmooth = \"none\"\n",
+      "enums.toml");
   EXPECT_EQ(s.solver.time_step, TimeStep::kFixed);
   EXPECT_EQ(s.freezing.fr_mode, FrMode::kMap);
   EXPECT_EQ(s.freezing.ce_aggregation, CeAggregation::kSum);

@@ -130,8 +130,8 @@ TEST(Scene, Im2013MethodPresetSetsTheBaselineAndExplicitValuesWin) {
   EXPECT_EQ(im.freezing.growth, Growth::kIsotropic);
   EXPECT_EQ(im.surface_tension.model, SurfaceTensionModel::kAkinci2013);
   EXPECT_EQ(im.viscosity.wall_beta0, 0);
-  const Scene sticky = ParseScene("[scene]\nmethod = \"im2013\"\n[sim]\nmodules = [\"gravity\", \"viscosity\"]\n[viscosity]\nwall_beta0 = 0.5\n",
-                                  "m.toml");
+  const Scene sticky =
+      ParseScene("[scene]\nmethod = \"im2013\"\n[sim]\nmodules = [\"gravity\", \"viscosity\"]\n[viscosity]\nwall_beta0 = 0.5\n", "m.toml");
   EXPECT_EQ(sticky.viscosity.wall_beta0, 0.5) << "an explicit value overrides the preset";
   EXPECT_THROW(ParseScene("[scene]\nmethod = \"im2014\"\n", "m.toml"), rime::Error);
 }

@@ -43,7 +43,9 @@ void CpuBounds(const Vec3<T>* points, Index n, Vec3<T>& lo, Vec3<T>& hi) {
         }
         return b;
       },
-      [](Box a, const Box& b) { return Box{Min(a.lo, b.lo), Max(a.hi, b.hi), a.finite && b.finite}; });
+      [](Box a, const Box& b) {
+        return Box{Min(a.lo, b.lo), Max(a.hi, b.hi), a.finite && b.finite};
+      });
   const T nan = std::numeric_limits<T>::quiet_NaN();
   lo = box.finite ? box.lo : Vec3<T>(nan, nan, nan);
   hi = box.finite ? box.hi : Vec3<T>(nan, nan, nan);
@@ -256,9 +258,10 @@ void UniformGrid<T>::BuildImpl(const Vec3<T>* points, Index n, T cell_size, cons
                          (hi.x - fixed_origin->x) / cell_size < T(kMaxCellsPerAxis - 4) &&
                          (hi.y - fixed_origin->y) / cell_size < T(kMaxCellsPerAxis - 4) &&
                          (hi.z - fixed_origin->z) / cell_size < T(kMaxCellsPerAxis - 4);
-  view_.origin = use_fixed ? *fixed_origin
-                           : Vec3<T>{std::floor(lo.x / cell_size) * cell_size - cell_size, std::floor(lo.y / cell_size) * cell_size - cell_size,
-                                     std::floor(lo.z / cell_size) * cell_size - cell_size};
+  view_.origin = use_fixed
+                     ? *fixed_origin
+                     : Vec3<T>{std::floor(lo.x / cell_size) * cell_size - cell_size, std::floor(lo.y / cell_size) * cell_size - cell_size,
+                               std::floor(lo.z / cell_size) * cell_size - cell_size};
 
   keys_.resize(n);
   sorted_index_.resize(n);
@@ -282,8 +285,8 @@ void UniformGrid<T>::BuildImpl(const Vec3<T>* points, Index n, T cell_size, cons
   const std::uint32_t end = static_cast<std::uint32_t>(n);
   exec::CopyToDevice(device_, cell_start_.data() + cells_, &end, sizeof end);
   exec::ParallelFor(device_, n,
-                    kernels::InsertCells{keys_.data(), flags_.data(), cell_of_slot_.data(), cell_start_.data(),
-                                         table_keys_.data(), table_cells_.data(), table_size - 1});
+                    kernels::InsertCells{keys_.data(), flags_.data(), cell_of_slot_.data(), cell_start_.data(), table_keys_.data(),
+                                         table_cells_.data(), table_size - 1});
 
   view_.table_keys = table_keys_.data();
   view_.table_cells = table_cells_.data();
@@ -376,8 +379,13 @@ void UniformGrid<T>::QueryGrid(const UniformGrid& queries, T radius, bool exclud
   values.w.resize(out.pairs());
   values.grad.resize(out.pairs());
   exec::ParallelFor(device_, m,
-                    kernels::PairValues<T>{.xi = queries.view_.points, .xj = view_.points, .offsets = out.offsets.data(),
-                                           .index = out.indices.data(), .kernel = values.kernel, .w = values.w.data(), .grad = values.grad.data()});
+                    kernels::PairValues<T>{.xi = queries.view_.points,
+                                           .xj = view_.points,
+                                           .offsets = out.offsets.data(),
+                                           .index = out.indices.data(),
+                                           .kernel = values.kernel,
+                                           .w = values.w.data(),
+                                           .grad = values.grad.data()});
 }
 
 // Two passes over the query cells, as the device kernels: count, scan, fill. Each cell copies its

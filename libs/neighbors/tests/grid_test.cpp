@@ -116,10 +116,8 @@ TEST(UniformGrid, QueryGridMatchesQuery) {
     for (bool aligned : {true, false}) {
       UniformGrid<float> ga(device), gb(device);
       ga.Build(da.data(), Index(a.size()), cell, origin);
-      if (aligned)
-        gb.Build(db.data(), Index(b.size()), cell, origin);
-      else
-        gb.Build(db.data(), Index(b.size()), cell);
+      if (aligned) gb.Build(db.data(), Index(b.size()), cell, origin);
+      else gb.Build(db.data(), Index(b.size()), cell);
       EXPECT_EQ(ga.aligned_with(gb), aligned);
       for (bool self : {true, false}) {
         const UniformGrid<float>& target = self ? ga : gb;
@@ -172,11 +170,17 @@ void CheckCpuPathAgainstKernels(bool clustered, bool self) {
   exec::cpu::ParallelFor(cells, kernels::CountNeighborsByCell<T>{target.view(), queries.view(), radius, self, counts.data()});
   const std::uint64_t total = exec::ExclusiveScan(device, counts.data(), offsets.data(), m + 1);
   exec::DeviceArray<std::uint32_t> indices(device, total);
-  exec::cpu::ParallelFor(cells, kernels::FillNeighborsByCell<T>{target.view(), queries.view(), radius, self, offsets.data(), indices.data()});
+  exec::cpu::ParallelFor(cells,
+                         kernels::FillNeighborsByCell<T>{target.view(), queries.view(), radius, self, offsets.data(), indices.data()});
   exec::DeviceArray<T> w(device, total);
   exec::DeviceArray<Vec3<T>> grad(device, total);
-  exec::cpu::ParallelFor(m, kernels::PairValues<T>{.xi = da.data(), .xj = target.view().points, .offsets = offsets.data(), .index = indices.data(),
-                                                   .kernel = kernel, .w = w.data(), .grad = grad.data()});
+  exec::cpu::ParallelFor(m, kernels::PairValues<T>{.xi = da.data(),
+                                                   .xj = target.view().points,
+                                                   .offsets = offsets.data(),
+                                                   .index = indices.data(),
+                                                   .kernel = kernel,
+                                                   .w = w.data(),
+                                                   .grad = grad.data()});
 
   NeighborList plain(device), with_values(device);
   exec::DeviceArray<T> fused_w(device);

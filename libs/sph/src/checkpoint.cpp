@@ -56,7 +56,9 @@ void Simulation<T>::Restore(const io::ParticleFrame& f) {
   State& s = *state_;
   const auto bits = f.numbers.find("precision_bits");
   if (bits == f.numbers.end() || bits->second != double(sizeof(T) * 8))
-    throw InputError(fmt::format("checkpoint precision does not match the scene's water.precision = \"{}\"", io::EnumName(scene_.fluid.precision)), f.source);
+    throw InputError(
+        fmt::format("checkpoint precision does not match the scene's water.precision = \"{}\"", io::EnumName(scene_.fluid.precision)),
+        f.source);
   if (std::fabs(f.spacing - scene_.fluid.spacing) > 1e-12 * scene_.fluid.spacing)
     throw InputError("checkpoint was written with a different water.spacing", f.source);
   auto number = [&](const std::string& key) {

@@ -39,7 +39,9 @@ Enclosure::Enclosure(const std::vector<Vec3d>& boundary, const std::vector<Vec3d
   cell_ = spacing;
   const Vec3d extent = hi - lo;
   // Two padding cells on each side, so that the border is outside every solid.
-  auto cells = [&](double c) { return (std::int64_t(extent.x / c) + 5) * (std::int64_t(extent.y / c) + 5) * (std::int64_t(extent.z / c) + 5); };
+  auto cells = [&](double c) {
+    return (std::int64_t(extent.x / c) + 5) * (std::int64_t(extent.y / c) + 5) * (std::int64_t(extent.z / c) + 5);
+  };
   while (cells(cell_) > max_cells) cell_ *= 1.25;
   origin_ = lo - Vec3d(2 * cell_, 2 * cell_, 2 * cell_);
   nx_ = std::int64_t(extent.x / cell_) + 5, ny_ = std::int64_t(extent.y / cell_) + 5, nz_ = std::int64_t(extent.z / cell_) + 5;

@@ -19,10 +19,19 @@ void Simulation<T>::Freeze(double dt) {
   const Index n = s.n(), nb = s.nb();
   if (n == 0 || nb == 0) return;
   modules_.CountLaunch("freezing");
-  const freeze::Particles<T> particles{.n = n, .nb = nb, .x = s.fluid.x.data(), .v = s.fluid.v.data(), .ff = &s.pairs.ff, .fb = &s.pairs.fb,
-                                       .fluid_grid = &s.fluid_grid, .boundary_x = s.boundary.x.data(), .boundary_volume = s.boundary.volume.data(),
-                                       .boundary_phase = s.boundary.phase.data(), .boundary_grid = &s.boundary_grid,
-                                       .viscosity_epsilon = scene_.viscosity.epsilon, .boundary_moves = s.any_animated};
+  const freeze::Particles<T> particles{.n = n,
+                                       .nb = nb,
+                                       .x = s.fluid.x.data(),
+                                       .v = s.fluid.v.data(),
+                                       .ff = &s.pairs.ff,
+                                       .fb = &s.pairs.fb,
+                                       .fluid_grid = &s.fluid_grid,
+                                       .boundary_x = s.boundary.x.data(),
+                                       .boundary_volume = s.boundary.volume.data(),
+                                       .boundary_phase = s.boundary.phase.data(),
+                                       .boundary_grid = &s.boundary_grid,
+                                       .viscosity_epsilon = scene_.viscosity.epsilon,
+                                       .boundary_moves = s.any_animated};
   DeviceArray<std::uint32_t> frozen_list(device_);
   const Index frozen = freeze::FreezeStep(device_, scene_, particles, dt, diffusion_pending_, *s.freezing,
                                           s.freezing_fluid ? &*s.freezing_fluid : nullptr, *s.freezing_work, s.keep, s.slot, frozen_list);
@@ -84,15 +93,19 @@ void Simulation<T>::ConvertToIce(const DeviceArray<std::uint32_t>& frozen_list, 
   s.boundary_grid.Query(fx.data(), frozen, support, false, near);
   w.wet.resize(s.nb());
   w.wet.SetZero();
-  exec::ParallelFor(device_, frozen, kernels::MarkListed{.offsets = near.offsets.data(), .index = near.indices.data(), .flags = w.wet.data()});
+  exec::ParallelFor(device_, frozen,
+                    kernels::MarkListed{.offsets = near.offsets.data(), .index = near.indices.data(), .flags = w.wet.data()});
   const Index dirty = exec::ListFlagged(device_, w.wet, s.nb(), s.slot, w.change_list);
   exec::ParallelFor(device_, dirty,
-                    boundary::kernels::BoundaryVolume<T>{.grid = s.boundary_grid.view(), .kernel = CubicSpline<T>(support / 2),
-                                                         .volumes = s.boundary.volume.data(), .list = w.change_list.data()});
+                    boundary::kernels::BoundaryVolume<T>{.grid = s.boundary_grid.view(),
+                                                         .kernel = CubicSpline<T>(support / 2),
+                                                         .volumes = s.boundary.volume.data(),
+                                                         .list = w.change_list.data()});
   FinishBoundaryVolumes();
   // The film diffusion re-evaluates around them (its caches hold until the boundary changes).
   w.structure_touched.resize(s.nb());
-  exec::ParallelFor(device_, dirty, freeze::kernels::SetListed{.list = w.change_list.data(), .value = 1u, .flags = w.structure_touched.data()});
+  exec::ParallelFor(device_, dirty,
+                    freeze::kernels::SetListed{.list = w.change_list.data(), .value = 1u, .flags = w.structure_touched.data()});
 }
 
 template void Simulation<float>::Freeze(double);

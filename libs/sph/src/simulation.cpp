@@ -46,7 +46,9 @@ std::pair<double, std::string> ExplicitStepLimit(const io::Scene& scene, const M
       if (g > 0) bound(0.25 * std::sqrt(h / (g * rho0)), st.gamma >= st.beta ? "surface_tension.gamma" : "surface_tension.beta");
     } else {
       const double kappa = std::max(st.kappa, st.kappa_boundary);
-      if (kappa > 0) bound(0.25 * std::sqrt(rho0 * h * h * h * h / kappa), st.kappa >= st.kappa_boundary ? "surface_tension.kappa" : "surface_tension.kappa_boundary");
+      if (kappa > 0)
+        bound(0.25 * std::sqrt(rho0 * h * h * h * h / kappa),
+              st.kappa >= st.kappa_boundary ? "surface_tension.kappa" : "surface_tension.kappa_boundary");
     }
   }
   if (modules.Enabled("air_pressure") && scene.air_pressure.p_atm > 0)
@@ -131,10 +133,13 @@ template <class T>
 void Simulation<T>::FinishBoundaryVolumes() {
   State& s = *state_;
   const double dp = scene_.fluid.spacing;
-  if (s.ice_count > 0) exec::ParallelFor(device_, s.nb(), kernels::CapIceVolume<T>{.phase = s.boundary.phase.data(), .cap = T(dp * dp * dp),
-                                                                                   .volume = s.boundary.volume.data()});
-  exec::ParallelFor(device_, s.nb(), kernels::Scale<T>{.in = s.boundary.volume.data(), .factor = T(scene_.fluid.rest_density),
-                                                       .out = s.boundary.psi.data()});
+  if (s.ice_count > 0)
+    exec::ParallelFor(
+        device_, s.nb(),
+        kernels::CapIceVolume<T>{.phase = s.boundary.phase.data(), .cap = T(dp * dp * dp), .volume = s.boundary.volume.data()});
+  exec::ParallelFor(
+      device_, s.nb(),
+      kernels::Scale<T>{.in = s.boundary.volume.data(), .factor = T(scene_.fluid.rest_density), .out = s.boundary.psi.data()});
 }
 
 template <class T>
@@ -144,9 +149,12 @@ void Simulation<T>::UpdateBoundaryMotion(double t) {
   std::vector<RigidMotion<T>> motions;
   for (const ObjectMotion& m : s.object_motions) motions.push_back(m.At<T>(t));
   s.motions.assign(motions);
-  exec::ParallelFor(device_, s.nb(), kernels::MoveBoundary<T>{.local = s.boundary.local.data(), .object = s.boundary.object.data(),
-                                                              .motions = s.motions.data(),
-                                                             .x = s.boundary.x.data(), .v = s.boundary.v.data()});
+  exec::ParallelFor(device_, s.nb(),
+                    kernels::MoveBoundary<T>{.local = s.boundary.local.data(),
+                                             .object = s.boundary.object.data(),
+                                             .motions = s.motions.data(),
+                                             .x = s.boundary.x.data(),
+                                             .v = s.boundary.v.data()});
   s.boundary_grid.Build(s.boundary.x.data(), s.nb(), T(2 * scene_.fluid.smoothing_length()), lattice_origin_);
 }
 
@@ -174,9 +182,10 @@ void Simulation<T>::Initialize() {
   s.initial_normals = {};
   for (std::size_t e = 0; e < scene_.emitters.size(); ++e)
     if (enclosure.Inside(scene_.emitters[e].center))
-      throw InputError(fmt::format("emitter {}'s nozzle centre ({}, {}, {}) lies inside a closed solid: its water would be simulated inside the object",
-                                   e + 1, scene_.emitters[e].center.x, scene_.emitters[e].center.y, scene_.emitters[e].center.z),
-                       SceneField(scene_, "emitter.center"));
+      throw InputError(
+          fmt::format("emitter {}'s nozzle centre ({}, {}, {}) lies inside a closed solid: its water would be simulated inside the object",
+                      e + 1, scene_.emitters[e].center.x, scene_.emitters[e].center.y, scene_.emitters[e].center.z),
+          SceneField(scene_, "emitter.center"));
   if (s.nb() > 0) {
     // Order boundary particles along the Z curve once (cache locality), then compute Akinci volumes.
     s.boundary_grid.Build(s.boundary.x.data(), s.nb(), support);
@@ -222,8 +231,9 @@ double Simulation<T>::NextTimeStep(double next_stop) const {
     const double g = Norm(scene_.solver.gravity);
     if (s.n() > 0 && g > 0 && modules_.Enabled("gravity")) {
       DeviceArray<T> heights(device_, 2 * s.n());
-      exec::ParallelFor(device_, s.n(), kernels::Heights<T>{.x = s.fluid.x.data(), .up = ToT<T>(scene_.solver.gravity / -g), .n = s.n(),
-                                                            .out = heights.data()});
+      exec::ParallelFor(
+          device_, s.n(),
+          kernels::Heights<T>{.x = s.fluid.x.data(), .up = ToT<T>(scene_.solver.gravity / -g), .n = s.n(), .out = heights.data()});
       const double top = double(exec::Max(device_, heights.data(), s.n()));
       const double bottom = -double(exec::Max(device_, heights.data() + s.n(), s.n()));
       max_speed = std::max(max_speed, std::sqrt(2 * g * (top - bottom)));
@@ -273,14 +283,17 @@ void Simulation<T>::CheckDivergence(const StepStats& stats) const {
   std::string particle = x.empty() ? "no particles"
                                    : fmt::format("worst particle id {} at ({:.4g}, {:.4g}, {:.4g}) m, speed {:.4g} m/s", ids[worst],
                                                  double(x[worst].x), double(x[worst].y), double(x[worst].z), double(Norm(v[worst])));
-  const std::string reason = bad_speed     ? "a particle velocity became NaN or infinite"
-                             : bad_courant ? fmt::format("particles move {:.3g} spacings per step (above {}, where they tunnel through walls): the time step is too large",
-                                                         courant, kMaxSpacingsPerStep)
-                                           : fmt::format("average density error {:.3g}% exceeds the limit {:.3g}% (sim.divergence_density_error)",
-                                                     100 * stats.average_density_error, 100 * limit);
+  const std::string reason =
+      bad_speed ? "a particle velocity became NaN or infinite"
+      : bad_courant
+          ? fmt::format("particles move {:.3g} spacings per step (above {}, where they tunnel through walls): the time step is too large",
+                        courant, kMaxSpacingsPerStep)
+          : fmt::format("average density error {:.3g}% exceeds the limit {:.3g}% (sim.divergence_density_error)",
+                        100 * stats.average_density_error, 100 * limit);
   const char* advice = scene_.solver.time_step == io::TimeStep::kFixed ? "Reduce sim.dt" : "Reduce sim.cfl or dt_max";
-  throw Error(ExitCode::kDiverged, fmt::format("simulation diverged at step {} (t = {:.6g} s, dt = {:.3g} s): {}; {}. {}, or check the scene",
-                                               step_count_, time_, stats.dt, reason, particle, advice));
+  throw Error(ExitCode::kDiverged,
+              fmt::format("simulation diverged at step {} (t = {:.6g} s, dt = {:.3g} s): {}; {}. {}, or check the scene", step_count_,
+                          time_, stats.dt, reason, particle, advice));
 }
 
 template <class T>
@@ -350,14 +363,38 @@ std::size_t Simulation<T>::MemoryBytes(const std::string& module) const {
   return bytes;
 }
 
-template <class T> std::vector<Vec3<T>> Simulation<T>::Positions() const { return state_->fluid.x.ToHost(); }
-template <class T> std::vector<Vec3<T>> Simulation<T>::Velocities() const { return state_->fluid.v.ToHost(); }
-template <class T> std::vector<T> Simulation<T>::Densities() const { return state_->fluid.density.ToHost(); }
-template <class T> std::vector<T> Simulation<T>::Pressures() const { return state_->fluid.pressure.ToHost(); }
-template <class T> std::vector<std::int64_t> Simulation<T>::Ids() const { return state_->fluid.id.ToHost(); }
-template <class T> std::vector<Vec3<T>> Simulation<T>::BoundaryPositions() const { return state_->boundary.x.ToHost(); }
-template <class T> std::vector<T> Simulation<T>::BoundaryVolumes() const { return state_->boundary.volume.ToHost(); }
-template <class T> std::vector<Vec3<T>> Simulation<T>::NonPressureAccelerations() const { return state_->step.accel.ToHost(); }
+template <class T>
+std::vector<Vec3<T>> Simulation<T>::Positions() const {
+  return state_->fluid.x.ToHost();
+}
+template <class T>
+std::vector<Vec3<T>> Simulation<T>::Velocities() const {
+  return state_->fluid.v.ToHost();
+}
+template <class T>
+std::vector<T> Simulation<T>::Densities() const {
+  return state_->fluid.density.ToHost();
+}
+template <class T>
+std::vector<T> Simulation<T>::Pressures() const {
+  return state_->fluid.pressure.ToHost();
+}
+template <class T>
+std::vector<std::int64_t> Simulation<T>::Ids() const {
+  return state_->fluid.id.ToHost();
+}
+template <class T>
+std::vector<Vec3<T>> Simulation<T>::BoundaryPositions() const {
+  return state_->boundary.x.ToHost();
+}
+template <class T>
+std::vector<T> Simulation<T>::BoundaryVolumes() const {
+  return state_->boundary.volume.ToHost();
+}
+template <class T>
+std::vector<Vec3<T>> Simulation<T>::NonPressureAccelerations() const {
+  return state_->step.accel.ToHost();
+}
 
 template <class T>
 void Simulation<T>::SetFluidState(const std::vector<Vec3<T>>& x, const std::vector<Vec3<T>>& v) {

@@ -56,8 +56,17 @@ template <class T>
 struct FluidStep : exec::AttributeGroup<FluidStep<T>> {
   static constexpr const char* kModule = "core";
   explicit FluidStep(const exec::Device& d)
-      : v_adv(d), accel(d), d_ii(d), s(d), density_error(d), pressure(d), pressure_next(d), advected_error(d), a_ii(d),
-        compression(d), scratch(d) {}
+      : v_adv(d),
+        accel(d),
+        d_ii(d),
+        s(d),
+        density_error(d),
+        pressure(d),
+        pressure_next(d),
+        advected_error(d),
+        a_ii(d),
+        compression(d),
+        scratch(d) {}
   DeviceArray<Vec3<T>> v_adv, accel, d_ii, s;
   DeviceArray<T> density_error, pressure, pressure_next, advected_error, a_ii, compression, scratch;
 
@@ -194,11 +203,23 @@ struct Simulation<T>::State {
   std::int64_t ice_count = 0;
 
   /// Calls f(group) for every water group that exists (they share the particle order).
-  template <class F> void ForEachFluidGroup(F&& f) { FluidGroups(*this, f); }
-  template <class F> void ForEachFluidGroup(F&& f) const { FluidGroups(*this, f); }
+  template <class F>
+  void ForEachFluidGroup(F&& f) {
+    FluidGroups(*this, f);
+  }
+  template <class F>
+  void ForEachFluidGroup(F&& f) const {
+    FluidGroups(*this, f);
+  }
   /// Calls f(group) for every boundary group that exists.
-  template <class F> void ForEachBoundaryGroup(F&& f) { BoundaryGroups(*this, f); }
-  template <class F> void ForEachBoundaryGroup(F&& f) const { BoundaryGroups(*this, f); }
+  template <class F>
+  void ForEachBoundaryGroup(F&& f) {
+    BoundaryGroups(*this, f);
+  }
+  template <class F>
+  void ForEachBoundaryGroup(F&& f) const {
+    BoundaryGroups(*this, f);
+  }
   template <class Self, class F>
   static void FluidGroups(Self& s, F& f) {
     f(s.fluid);

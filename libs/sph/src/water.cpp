@@ -31,7 +31,8 @@ void Simulation<T>::SeedWater(const Enclosure& enclosure) {
       const Vec3d ext = block.max - block.min;
       const std::int64_t nx = std::int64_t(std::floor(ext.x / dp + 1e-6)) + 1, ny = std::int64_t(std::floor(ext.y / dp + 1e-6)) + 1,
                          nz = std::int64_t(std::floor(ext.z / dp + 1e-6)) + 1;
-      if (nx * ny * nz > 200'000'000) throw InputError("water block would create more than 200 million particles", SceneField(scene_, "water_block"));
+      if (nx * ny * nz > 200'000'000)
+        throw InputError("water block would create more than 200 million particles", SceneField(scene_, "water_block"));
       for (std::int64_t k = 0; k < nz; ++k)
         for (std::int64_t j = 0; j < ny; ++j)
           for (std::int64_t i = 0; i < nx; ++i) {
@@ -81,13 +82,15 @@ void Simulation<T>::SeedWater(const Enclosure& enclosure) {
     // coarse for centimetre particles. Refuse rather than simulate silently wrong motion.
     double far = 0;
     for (const Vec3<T>& p : x) far = std::max({far, std::fabs(double(p.x)), std::fabs(double(p.y)), std::fabs(double(p.z))});
-    for (const Vec3<T>& p : s.boundary.x.ToHost()) far = std::max({far, std::fabs(double(p.x)), std::fabs(double(p.y)), std::fabs(double(p.z))});
+    for (const Vec3<T>& p : s.boundary.x.ToHost())
+      far = std::max({far, std::fabs(double(p.x)), std::fabs(double(p.y)), std::fabs(double(p.z))});
     const double resolution = far * std::ldexp(1.0, -23);
     if (resolution > 0.01 * dp)
-      throw InputError(fmt::format("the scene reaches {:.4g} m from the origin, where single precision resolves only {:.3g} m ({:.2g} particle "
-                                   "spacings): set water.precision = \"double\" or move the scene near the origin",
-                                   far, resolution, resolution / dp),
-                       SceneField(scene_, "water.precision"));
+      throw InputError(
+          fmt::format("the scene reaches {:.4g} m from the origin, where single precision resolves only {:.3g} m ({:.2g} particle "
+                      "spacings): set water.precision = \"double\" or move the scene near the origin",
+                      far, resolution, resolution / dp),
+          SceneField(scene_, "water.precision"));
   }
   if (!scene_.fluid_blocks.empty() && x.empty() && scene_.emitters.empty())
     throw InputError("every water particle lies inside or against a solid: nothing to simulate", SceneField(scene_, "water_block"));
@@ -112,7 +115,8 @@ void Simulation<T>::RemoveOutsideDomain(StepStats& stats) {
   if (n == 0) return;
   s.keep.resize(n);
   s.slot.resize(n);
-  exec::ParallelFor(device_, n, kernels::InsideDomain<T>{.x = s.fluid.x.data(), .lo = domain_min_, .hi = domain_max_, .keep = s.keep.data()});
+  exec::ParallelFor(device_, n,
+                    kernels::InsideDomain<T>{.x = s.fluid.x.data(), .lo = domain_min_, .hi = domain_max_, .keep = s.keep.data()});
   const Index kept = exec::ListFlagged(device_, s.keep, n, s.slot, s.order);
   if (kept == n) return;
   s.GatherFluid(device_, kept);

@@ -13,7 +13,7 @@ void CubeSurface(double a, double s, double sign, bool open_top, std::vector<Vec
   for (int i = 0; i <= m; ++i)
     for (int j = 0; j <= m; ++j) {
       const double u = i * s, v = j * s;
-      const Vec3d face[6][2] = {{{u, v, 0}, {0, 0, -1}}, {{u, v, a}, {0, 0, 1}}, {{u, 0, v}, {0, -1, 0}},
+      const Vec3d face[6][2] = {{{u, v, 0}, {0, 0, -1}}, {{u, v, a}, {0, 0, 1}},  {{u, 0, v}, {0, -1, 0}},
                                 {{u, a, v}, {0, 1, 0}},  {{0, u, v}, {-1, 0, 0}}, {{a, u, v}, {1, 0, 0}}};
       for (int f = 0; f < 6; ++f) {
         if (open_top && f == 1) continue;

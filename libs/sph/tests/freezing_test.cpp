@@ -49,7 +49,8 @@ TEST(Freezing, InvariantsAlongARun) {
     const double stop = frame / 24.0;
     while (sim->time() < stop - 1e-9) sim->Step(sim->NextTimeStep(stop));
     const Observed now = Observe(*sim);
-    std::printf("frame %d: t = %.3f s, %lld steps, %lld water, %zu ice\n", frame, sim->time(), (long long)sim->step_count(), (long long)now.water, now.ice.size());
+    std::printf("frame %d: t = %.3f s, %lld steps, %lld water, %zu ice\n", frame, sim->time(), (long long)sim->step_count(),
+                (long long)now.water, now.ice.size());
     EXPECT_EQ(now.water + std::int64_t(now.ice.size()) + sim->removed_total(), total) << "mass is conserved (T21)";
     for (const auto& [id, x] : previous.ice) {
       ASSERT_TRUE(now.ice.count(id)) << "ice particle " << id << " thawed (T20)";
@@ -158,9 +159,9 @@ namespace {
 
 struct IceShape {
   std::size_t count = 0;
-  Vec3d axis;           // principal axis of the ice cloud (unit)
+  Vec3d axis;             // principal axis of the ice cloud (unit)
   double elongation = 0;  // sqrt(σ1/σ2)
-  Vec3d growth;         // centroid of the youngest third minus centroid of the oldest third
+  Vec3d growth;           // centroid of the youngest third minus centroid of the oldest third
 };
 
 IceShape MeasureIce(const Simulation<float>& sim) {
@@ -220,9 +221,7 @@ IceShape StreamOverPlate(double direction, const std::string& growth) {
   return MeasureIce(sim);
 }
 
-double AngleToX(const Vec3d& axis) {
-  return std::acos(std::min(1.0, std::fabs(axis.x) / Norm(axis))) * 180 / M_PI;
-}
+double AngleToX(const Vec3d& axis) { return std::acos(std::min(1.0, std::fabs(axis.x) / Norm(axis))) * 180 / M_PI; }
 
 TEST(Freezing, IceFollowsTheFlowDirection) {
   const IceShape plus = StreamOverPlate(+1, "anisotropic");
@@ -374,7 +373,8 @@ void ExpectCachesMatchRecomputing(float wet_boundary) {
   const io::ParticleFrame a = cached->Snapshot(0), b = rebuilt->Snapshot(0);
   ASSERT_GT(cached->ice_count(), 0) << "nothing froze: the caches were not tested against new ice";
   const auto& film = a.Get<float>("water_film");
-  ASSERT_GT(std::count_if(film.begin(), film.end(), [&](float f) { return f > 0 && f < 1 && f != wet_boundary; }), 10) << "no film diffused";
+  ASSERT_GT(std::count_if(film.begin(), film.end(), [&](float f) { return f > 0 && f < 1 && f != wet_boundary; }), 10)
+      << "no film diffused";
   EXPECT_EQ(film, b.Get<float>("water_film"));
   EXPECT_EQ(Observe(*cached).ice, Observe(*rebuilt).ice);
   EXPECT_EQ(cached->Positions(), rebuilt->Positions());

@@ -25,8 +25,7 @@ std::vector<double> ReadReal(const io::ParticleFrame& frame, const std::string& 
 
 }  // namespace
 
-ParticleSet SelectPhase(const io::ParticleFrame& frame, io::Phase phase, const SelectOptions& options,
-                        std::vector<std::string>& warnings) {
+ParticleSet SelectPhase(const io::ParticleFrame& frame, io::Phase phase, const SelectOptions& options, std::vector<std::string>& warnings) {
   frame.Validate();
   if (!(frame.spacing > 0) || !std::isfinite(frame.spacing))
     throw InputError(fmt::format("root attribute 'spacing' must be a positive length in m (found {})", frame.spacing),
@@ -51,8 +50,7 @@ ParticleSet SelectPhase(const io::ParticleFrame& frame, io::Phase phase, const S
     if (phases[i] == static_cast<std::uint8_t>(phase)) chosen.push_back(i);
   set.positions.reserve(chosen.size());
   for (std::size_t i : chosen) {
-    if (!IsFinite(positions[i]))
-      throw InputError(fmt::format("particle {} has a non-finite position", i), Where(frame, "x/y/z"));
+    if (!IsFinite(positions[i])) throw InputError(fmt::format("particle {} has a non-finite position", i), Where(frame, "x/y/z"));
     set.positions.push_back(positions[i]);
   }
   if (frame.Has("vx") && frame.Has("vy") && frame.Has("vz")) {

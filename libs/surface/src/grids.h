@@ -19,8 +19,7 @@ openvdb::FloatGrid::Ptr EmptyLevelSet(double voxel_size, double half_band);
 /// Triangle mesh of the zero level set, outward counter-clockwise, with area-weighted normals;
 /// drops enclosed inward-facing shells unless keep_voids. Returns the number of shells dropped.
 /// Meshed in slabs of at most `slab_leaves` leaves (the mesher's scratch: about 6 kB per leaf).
-std::uint64_t ExtractMesh(const openvdb::FloatGrid& grid, bool keep_voids, io::TriMesh& mesh,
-                          std::size_t slab_leaves = 8192);
+std::uint64_t ExtractMesh(const openvdb::FloatGrid& grid, bool keep_voids, io::TriMesh& mesh, std::size_t slab_leaves = 8192);
 
 void InitializeOpenVdb();
 

@@ -137,8 +137,8 @@ PreparedParticles Prepare(const ParticleSet& particles, const Settings& settings
   const bool stored = !particles.stored_anisotropy.empty() && !settings.recompute_anisotropy;
   const bool anisotropic = settings.field != Field::kIsotropic;
   const bool need_pca = anisotropic && !stored;
-  const bool need_neighbors = need_pca || settings.lambda > 0 || settings.field == Field::kEllipsoids ||
-                              settings.field == Field::kIsotropic;
+  const bool need_neighbors =
+      need_pca || settings.lambda > 0 || settings.field == Field::kEllipsoids || settings.field == Field::kIsotropic;
 
   const float support = float(2 * h);
   exec::Device cpu = exec::Device::Cpu();

@@ -60,14 +60,14 @@ std::int64_t FloorDiv(double v) { return std::int64_t(std::floor(v / kLeafDim));
 /// Which leaves exist and which particles each one must visit.
 struct Plan {
   double dx = 0;
-  openvdb::Coord offset;            // global index of local voxel (0,0,0); a multiple of 8
-  std::vector<Vec3f> u;             // particle centres in local voxel coordinates
-  std::vector<float> reach;         // voxels: beyond this a particle cannot change a voxel
-  std::vector<std::uint32_t> sorted;         // particle indices grouped by leaf
-  std::vector<std::uint32_t> bin_start;      // per occupied leaf, into sorted (size bins + 1)
+  openvdb::Coord offset;                 // global index of local voxel (0,0,0); a multiple of 8
+  std::vector<Vec3f> u;                  // particle centres in local voxel coordinates
+  std::vector<float> reach;              // voxels: beyond this a particle cannot change a voxel
+  std::vector<std::uint32_t> sorted;     // particle indices grouped by leaf
+  std::vector<std::uint32_t> bin_start;  // per occupied leaf, into sorted (size bins + 1)
   std::unordered_map<std::uint64_t, std::uint32_t> bin_of_key;
-  std::vector<std::uint64_t> targets;        // leaves to evaluate
-  int K = 1;                                 // neighbourhood radius in leaves
+  std::vector<std::uint64_t> targets;  // leaves to evaluate
+  int K = 1;                           // neighbourhood radius in leaves
 };
 
 Plan MakePlan(const std::vector<Vec3d>& world_centers, const std::vector<float>& reach, double dx) {
@@ -137,12 +137,12 @@ Plan MakePlan(const std::vector<Vec3d>& world_centers, const std::vector<float>&
 /// Everything the per-leaf evaluation reads, in local voxel units.
 struct FieldInputs {
   Field field = Field::kEllipsoids;
-  float rho = 0;                     // ellipsoid level r_iso / Δx
-  float band = 3;                    // half band, voxels
+  float rho = 0;                            // ellipsoid level r_iso / Δx
+  float band = 3;                           // half band, voxels
   const std::array<float, 6>* D = nullptr;  // per particle (null: isotropic)
   const float* min_stretch = nullptr;
-  float inv_h = 0;                   // kernel sum: 1 / h in voxels
-  float volume = 0;                  // kernel sum: V / Δx³
+  float inv_h = 0;   // kernel sum: 1 / h in voxels
+  float volume = 0;  // kernel sum: V / Δx³
   float iso = 0.5f;
   bool track_nearest = false;
   const std::uint8_t* interior = nullptr;  // per particle: fully surrounded (Prepare); null: no DeepLeaves
@@ -184,9 +184,8 @@ struct SymMat {
   float xx, yy, zz, xy, xz, yz;
 };
 SymMat Square(const SymMat& d) {
-  return {d.xx * d.xx + d.xy * d.xy + d.xz * d.xz, d.xy * d.xy + d.yy * d.yy + d.yz * d.yz,
-          d.xz * d.xz + d.yz * d.yz + d.zz * d.zz, d.xx * d.xy + d.xy * d.yy + d.xz * d.yz,
-          d.xx * d.xz + d.xy * d.yz + d.xz * d.zz, d.xy * d.xz + d.yy * d.yz + d.yz * d.zz};
+  return {d.xx * d.xx + d.xy * d.xy + d.xz * d.xz, d.xy * d.xy + d.yy * d.yy + d.yz * d.yz, d.xz * d.xz + d.yz * d.yz + d.zz * d.zz,
+          d.xx * d.xy + d.xy * d.yy + d.xz * d.yz, d.xx * d.xz + d.xy * d.yz + d.xz * d.zz, d.xy * d.xz + d.yy * d.yz + d.yz * d.zz};
 }
 
 constexpr float kNoValue = 3.4e38f;  // larger than any distance: min() keeps the other value
@@ -252,8 +251,7 @@ void SplatEllipsoid(const FieldInputs& in, std::uint32_t i, const Vec3f& c, floa
 }
 
 // Yu & Turk kernel sum Σ V W_A(x − x̄_i, G_i) and its gradient.
-void SplatKernel(const FieldInputs& in, std::uint32_t i, const Vec3f& c, float reach, const int lo[3], const int hi[3],
-                 LeafBuffers& buf) {
+void SplatKernel(const FieldInputs& in, std::uint32_t i, const Vec3f& c, float reach, const int lo[3], const int hi[3], LeafBuffers& buf) {
   SymMat g{in.inv_h, in.inv_h, in.inv_h, 0, 0, 0};
   if (in.D) {
     const auto& a = in.D[i];
@@ -273,8 +271,7 @@ void SplatKernel(const FieldInputs& in, std::uint32_t i, const Vec3f& c, float r
       const int z0 = std::max(lo[2], int(std::ceil(c.z - half))), z1 = std::min(hi[2], int(std::floor(c.z + half)));
       for (int z = z0; z <= z1; ++z) {
         const float rz = float(z) - c.z;
-        const float px = g.xx * rx + g.xy * ry + g.xz * rz, py = g.xy * rx + g.yy * ry + g.yz * rz,
-                    pz = g.xz * rx + g.yz * ry + g.zz * rz;
+        const float px = g.xx * rx + g.xy * ry + g.xz * rz, py = g.xy * rx + g.yy * ry + g.yz * rz, pz = g.xz * rx + g.yz * ry + g.zz * rz;
         const float q = std::sqrt(px * px + py * py + pz * pz);
         if (q >= 2.0f) continue;
         const float w = scale * CubicSpline<float>::Shape(q);
@@ -365,8 +362,8 @@ RasterOutput Rasterize(const Plan& plan, const FieldInputs& in, const std::vecto
         // Distance-like field from the sum: (iso − f) / ‖∇f‖ (first-order distance to f = iso).
         for (int v = 0; v < 512; ++v) {
           const float f = buf->sum[v];
-          const float g = std::sqrt(buf->grad[0][v] * buf->grad[0][v] + buf->grad[1][v] * buf->grad[1][v] +
-                                    buf->grad[2][v] * buf->grad[2][v]);
+          const float g =
+              std::sqrt(buf->grad[0][v] * buf->grad[0][v] + buf->grad[1][v] * buf->grad[1][v] + buf->grad[2][v] * buf->grad[2][v]);
           const float diff = in.iso - f;
           buf->phi[v] = std::fabs(diff) < band * g ? diff / g : (diff > 0 ? band : -band);
         }
@@ -464,7 +461,7 @@ void BuildInteriorBand(openvdb::FloatTree& tree, openvdb::MaskTree& inside, floa
   // Erodes `inside` in place, one layer at a time, and applies each layer before the next.
   for (int k = 1; k <= layers; ++k) {
     openvdb::tools::erodeActiveValues(inside, 1, openvdb::tools::NN_FACE_EDGE_VERTEX, openvdb::tools::IGNORE_TILES);
-    manager.foreach([&](openvdb::FloatTree::LeafNodeType& leaf, std::size_t) {
+    manager.foreach ([&](openvdb::FloatTree::LeafNodeType& leaf, std::size_t) {
       const auto* mask = inside.probeConstLeaf(leaf.origin());
       if (!mask) return;
       for (auto it = mask->cbeginValueOn(); it; ++it) {
@@ -517,8 +514,8 @@ void CheckSettings(const ParticleSet& particles, const Settings& s) {
   if (!(a.s_min > 0 && a.s_min <= a.s_max)) fail("need 0 < s_min <= s_max", "s_min");
 }
 
-std::vector<float> ReachVoxels(const ParticleSet& particles, const Settings& s, const PreparedParticles* prepared,
-                               double dx, float rho, float band, float h_vox) {
+std::vector<float> ReachVoxels(const ParticleSet& particles, const Settings& s, const PreparedParticles* prepared, double dx, float rho,
+                               float band, float h_vox) {
   const std::size_t n = particles.size();
   std::vector<float> reach(n);
   for (std::size_t i = 0; i < n; ++i) {
@@ -545,15 +542,14 @@ std::uint64_t EstimateMemoryBytes(const ParticleSet& particles, const Settings& 
   if (n == 0) return 0;
   const double dx = VoxelSize(particles, settings);
   const double h = particles.smoothing_length > 0 ? particles.smoothing_length : particles.spacing;
-  const std::vector<float> reach =
-      ReachVoxels(particles, settings, nullptr, dx, float(settings.r_iso * particles.spacing / dx), float(settings.half_band),
-                  float(h / dx));
+  const std::vector<float> reach = ReachVoxels(particles, settings, nullptr, dx, float(settings.r_iso * particles.spacing / dx),
+                                               float(settings.half_band), float(h / dx));
   const Plan plan = MakePlan(particles.positions, reach, dx);
   if (voxels) *voxels = plan.targets.size() * 512;
   // Per leaf: float values + masks (surface, inside, erosion copies) + node overhead; the mesh is
   // bounded by the surface leaves (about 2 triangles and one vertex per surface voxel).
-  const double leaf_bytes = 512 * 4 + 64 * (4 + std::ceil(settings.half_band)) + 96 +
-                            (settings.velocity_grid ? 512 * 12 : 0) + (settings.density_grid ? 512 * 4 : 0);
+  const double leaf_bytes = 512 * 4 + 64 * (4 + std::ceil(settings.half_band)) + 96 + (settings.velocity_grid ? 512 * 12 : 0) +
+                            (settings.density_grid ? 512 * 4 : 0);
   const double particle_bytes = 24 + 12 + 24 + 12 + 8 + 3 + 32 + 16;  // input, centres, D, velocity, stretches, grid, plan
   // Internal nodes: 16³-child nodes cover 128³ voxels (~50 kB each), 32³-child nodes 4096³ (~400 kB).
   std::vector<std::uint64_t> upper1, upper2;
@@ -584,8 +580,8 @@ Result Reconstruct(const ParticleSet& particles, const Settings& settings) {
   stats.particles = particles.size();
   const double dx = VoxelSize(particles, settings);
   stats.voxel_size = dx;
-  const double particle_reach = std::max(settings.r_iso * particles.spacing,
-                                         2 * (particles.smoothing_length > 0 ? particles.smoothing_length : particles.spacing));
+  const double particle_reach =
+      std::max(settings.r_iso * particles.spacing, 2 * (particles.smoothing_length > 0 ? particles.smoothing_length : particles.spacing));
   if (!(particle_reach / dx <= 100))
     throw InputError(fmt::format("voxel size {:.3g} m is too small for particle spacing {:.3g} m: one particle would span "
                                  "{:.0f} voxels (at most 100)",
@@ -619,8 +615,8 @@ Result Reconstruct(const ParticleSet& particles, const Settings& settings) {
   in.volume = float(volume / (dx * dx * dx));
   in.iso = float(settings.iso);
   // Deep leaves are at least a leaf (8 voxels) inside: only for bands well within that.
-  const bool deep_tiles = settings.deep_interior_tiles && !settings.keep_voids && settings.field != Field::kKernelSum &&
-                          settings.half_band <= 4;
+  const bool deep_tiles =
+      settings.deep_interior_tiles && !settings.keep_voids && settings.field != Field::kKernelSum && settings.half_band <= 4;
   in.interior = deep_tiles ? prepared.interior.data() : nullptr;
   const bool want_velocity = settings.velocity_grid && !particles.velocities.empty();
   in.track_nearest = want_velocity;

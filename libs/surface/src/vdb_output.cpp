@@ -163,10 +163,9 @@ std::uint64_t ExtractMesh(const openvdb::FloatGrid& grid, bool keep_voids, io::T
   for (std::size_t slab = 0; slab + 1 < cuts.size(); ++slab) {
     const int lo = cuts[slab], hi = cuts[slab + 1];
     auto part = std::make_shared<Tree>(tree.background());
-    const auto first = std::lower_bound(leaves.begin(), leaves.end(), lo - kHalo,
-                                        [axis](const auto* leaf, int v) { return leaf->origin()[axis] < v; });
-    for (auto it = first; it != leaves.end() && (*it)->origin()[axis] < hi + kHalo; ++it)
-      part->addLeaf(new Tree::LeafNodeType(**it));
+    const auto first =
+        std::lower_bound(leaves.begin(), leaves.end(), lo - kHalo, [axis](const auto* leaf, int v) { return leaf->origin()[axis] < v; });
+    for (auto it = first; it != leaves.end() && (*it)->origin()[axis] < hi + kHalo; ++it) part->addLeaf(new Tree::LeafNodeType(**it));
     for (std::size_t t = 0; t < tiles.size(); ++t)
       if (tiles[t].second.max()[axis] >= lo - kHalo && tiles[t].second.min()[axis] < hi + kHalo)
         part->addTile(tile_levels[t], tiles[t].second.min(), tiles[t].first, false);
@@ -207,8 +206,9 @@ std::uint64_t ExtractMesh(const openvdb::FloatGrid& grid, bool keep_voids, io::T
       // volumeToMesh winds clockwise seen from outside: reverse (LIBRARY_NOTES.md).
       for (std::size_t k = 0; k < pool.numQuads(); ++k) {
         const openvdb::Vec4I& q = pool.quad(k);
-        const openvdb::Vec3d centroid = (openvdb::Vec3d(points[q[0]]) + openvdb::Vec3d(points[q[1]]) +
-                                         openvdb::Vec3d(points[q[2]]) + openvdb::Vec3d(points[q[3]])) * 0.25;
+        const openvdb::Vec3d centroid =
+            (openvdb::Vec3d(points[q[0]]) + openvdb::Vec3d(points[q[1]]) + openvdb::Vec3d(points[q[2]]) + openvdb::Vec3d(points[q[3]])) *
+            0.25;
         if (!owned(centroid)) continue;
         const std::uint32_t v0 = vertex(q[0]), v1 = vertex(q[1]), v2 = vertex(q[2]), v3 = vertex(q[3]);
         mesh.triangles.push_back({v2, v1, v0});
@@ -216,8 +216,7 @@ std::uint64_t ExtractMesh(const openvdb::FloatGrid& grid, bool keep_voids, io::T
       }
       for (std::size_t k = 0; k < pool.numTriangles(); ++k) {
         const openvdb::Vec3I& t = pool.triangle(k);
-        const openvdb::Vec3d centroid =
-            (openvdb::Vec3d(points[t[0]]) + openvdb::Vec3d(points[t[1]]) + openvdb::Vec3d(points[t[2]])) / 3.0;
+        const openvdb::Vec3d centroid = (openvdb::Vec3d(points[t[0]]) + openvdb::Vec3d(points[t[1]]) + openvdb::Vec3d(points[t[2]])) / 3.0;
         if (!owned(centroid)) continue;
         const std::uint32_t v0 = vertex(t[0]), v1 = vertex(t[1]), v2 = vertex(t[2]);
         mesh.triangles.push_back({v2, v1, v0});
@@ -304,7 +303,7 @@ std::vector<VdbGridInfo> InspectVdb(const std::filesystem::path& path) {
       info.name = grid->getName();
       info.grid_class = grid->getGridClass() == openvdb::GRID_LEVEL_SET    ? "level set"
                         : grid->getGridClass() == openvdb::GRID_FOG_VOLUME ? "fog volume"
-                                                                            : "unknown";
+                                                                           : "unknown";
       info.voxel_size = grid->voxelSize()[0];
       info.active_voxels = grid->activeVoxelCount();
       if (auto f = openvdb::gridPtrCast<openvdb::FloatGrid>(grid)) info.background = f->background();

@@ -124,8 +124,8 @@ TEST(Reconstruct, BallRadiusAndClosedMeshForEveryField) {
     // (λ = 0.9) pulls the outer layer in by about 0.16 d_p (0.3–0.5 voxel) in every field.
     EXPECT_NEAR(MeanDistance(result.mesh, center), expected, dx) << FieldName(field);
     // A level set: far inside −background, far outside +background, values near the surface ≈ distance.
-    const auto values = SampleSurface(result, {center, center + Vec3d(2 * radius, 0, 0),
-                                               center + Vec3d(expected + 2 * dx, 0, 0), center + Vec3d(expected - 2 * dx, 0, 0)});
+    const auto values = SampleSurface(result, {center, center + Vec3d(2 * radius, 0, 0), center + Vec3d(expected + 2 * dx, 0, 0),
+                                               center + Vec3d(expected - 2 * dx, 0, 0)});
     EXPECT_FLOAT_EQ(values[0], float(-3 * dx)) << FieldName(field);
     EXPECT_FLOAT_EQ(values[1], float(3 * dx)) << FieldName(field);
     EXPECT_NEAR(values[2], 2 * dx, 1.1 * dx) << FieldName(field);
@@ -164,9 +164,7 @@ TEST(Prepare, EllipsoidsAreScaledToUnitVolumeUpToSmax) {
     for (int k = 0; k < 3; ++k) {
       EXPECT_NEAR(1 / inv[k], std::min(1.0f, g / inv_stored[k]), 1e-4f) << i;
       // Same axis (up to sign) where the stretch is distinct enough to define one.
-      const auto gap = [k](const Vec3f& v) {
-        return std::min(std::fabs(v[k] - v[(k + 1) % 3]), std::fabs(v[k] - v[(k + 2) % 3])) / v[k];
-      };
+      const auto gap = [k](const Vec3f& v) { return std::min(std::fabs(v[k] - v[(k + 1) % 3]), std::fabs(v[k] - v[(k + 2) % 3])) / v[k]; };
       if (gap(inv_stored) > 0.1f && gap(inv) > 0.1f) {
         EXPECT_NEAR(std::fabs(Dot(axes.Column(k), axes_stored.Column(k))), 1.0f, 1e-3f) << i;
       }
@@ -274,8 +272,7 @@ void ExpectSameResult(const Result& a, const Result& b, const std::string& what)
   for (const auto* first : {&ga, &gb}) {
     const openvdb::FloatGrid& second = first == &ga ? gb : ga;
     auto acc = second.getConstAccessor();
-    for (auto it = first->cbeginValueOn(); it; ++it)
-      differing += acc.getValue(it.getCoord()) != *it || !acc.isValueOn(it.getCoord());
+    for (auto it = first->cbeginValueOn(); it; ++it) differing += acc.getValue(it.getCoord()) != *it || !acc.isValueOn(it.getCoord());
   }
   EXPECT_EQ(differing, 0u) << what << ": voxels whose value or state differ";
   EXPECT_TRUE(a.mesh.positions == b.mesh.positions) << what << ": mesh vertices";

@@ -47,9 +47,9 @@ using nlohmann::json;
 
 namespace {
 
-constexpr double kA = 0.25;        // column width, m (height 2a)
-constexpr double kDepth = 0.075;   // channel depth, m (6 particles at the base spacing)
-constexpr int kBasePerA = 20;      // base resolution: a = 20 d_p (d_p = 12.5 mm)
+constexpr double kA = 0.25;           // column width, m (height 2a)
+constexpr double kDepth = 0.075;      // channel depth, m (6 particles at the base spacing)
+constexpr int kBasePerA = 20;         // base resolution: a = 20 d_p (d_p = 12.5 mm)
 constexpr double kSampleEvery = 0.1;  // s: the front is compared at 0.1, 0.2, ... s
 
 struct Setting {
@@ -57,7 +57,7 @@ struct Setting {
   io::Scene scene;
   int per_a = kBasePerA;
   bool freezing = false;
-  std::string snapshot;  // freezing reference: where to write its last frame (voxel-size sweep)
+  std::string snapshot;    // freezing reference: where to write its last frame (voxel-size sweep)
   double voxel_ratio = 0;  // voxel-size sweep: voxel / d_p
 };
 
@@ -137,11 +137,21 @@ json RunSim(const Setting& s, double end_time) {
     diverged = true, failure = e.what();
   }
   const double wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  json r = {{"wall_s", wall_s}, {"steps", steps}, {"mean_iterations", steps ? double(iterations) / steps : 0.0},
-            {"unconverged_steps", unconverged}, {"mean_density_error", steps ? err_sum / steps : 0.0},
-            {"max_density_error", err_max}, {"mean_measured_density_error", steps ? measured_sum / steps : 0.0}, {"volume_drift", diverged ? 0.0 : volume() / volume0 - 1}, {"front_z", front},
-            {"fluid", sim.fluid_count()}, {"ice", sim.ice_count()}, {"diverged", diverged}, {"failure", failure},
-            {"dp", dp}, {"threads", exec::CpuThreads()}};
+  json r = {{"wall_s", wall_s},
+            {"steps", steps},
+            {"mean_iterations", steps ? double(iterations) / steps : 0.0},
+            {"unconverged_steps", unconverged},
+            {"mean_density_error", steps ? err_sum / steps : 0.0},
+            {"max_density_error", err_max},
+            {"mean_measured_density_error", steps ? measured_sum / steps : 0.0},
+            {"volume_drift", diverged ? 0.0 : volume() / volume0 - 1},
+            {"front_z", front},
+            {"fluid", sim.fluid_count()},
+            {"ice", sim.ice_count()},
+            {"diverged", diverged},
+            {"failure", failure},
+            {"dp", dp},
+            {"threads", exec::CpuThreads()}};
   if (s.freezing && !diverged) {
     const io::ParticleFrame frame = sim.Snapshot(0);
     const auto& phase = frame.Get<std::uint8_t>("phase");
@@ -167,9 +177,8 @@ json RunSim(const Setting& s, double end_time) {
 // at 0.15-0.29 m/s after 6 s, which made the slope wander by ±4 % between settings. So the spec's
 // viscosity is on (gravity alone on the dam break), and the column settles and is then averaged
 // as the validation program's (3 s each); each particle's pressure and height are averaged, and
-// p(z) is fitted over the particles at least 2.5 d_p from the walls, floor and surface. Returns the slope's relative error against −ρ0 g, the
-// same fitted on either half of the window (their half-difference estimates the figure's noise)
-// and the fastest particle at the end.
+// p(z) is fitted over the particles at least 2.5 d_p from the walls, floor and surface. Returns the slope's relative error against −ρ0 g,
+// the same fitted on either half of the window (their half-difference estimates the figure's noise) and the fastest particle at the end.
 template <class T>
 json RunHydrostatic(const Setting& s) {
   const int layers = s.per_a, across = std::max(8, int(std::lround(0.4 * s.per_a)));
@@ -283,7 +292,7 @@ json RunVoxelSweep(const Setting& s) {
   const double wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   rusage usage{};
   getrusage(RUSAGE_SELF, &usage);
-  json r = {{"wall_s", wall_s}, {"surface_cpu_s", CpuSeconds(usage)}, {"surface_peak_rss_mib", usage.ru_maxrss / 1024.0},
+  json r = {{"wall_s", wall_s},  {"surface_cpu_s", CpuSeconds(usage)},  {"surface_peak_rss_mib", usage.ru_maxrss / 1024.0},
             {"ice", ice.size()}, {"triangles", coarse.stats.triangles}, {"voxel_size", coarse.stats.voxel_size}};
   settings.voxel_ratio = kFinestVoxel;
   const surface::Result fine = surface::Reconstruct(ice, settings);
@@ -305,9 +314,12 @@ json RunVoxelSweep(const Setting& s) {
 json RunJob(Job job, const Setting& s, double end_time) {
   const bool dbl = s.scene.fluid.precision == rime::io::Precision::kDouble;
   switch (job) {
-    case Job::kDamBreak: return dbl ? RunSim<double>(s, end_time) : RunSim<float>(s, end_time);
-    case Job::kHydrostatic: return dbl ? RunHydrostatic<double>(s) : RunHydrostatic<float>(s);
-    case Job::kVoxelSweep: return RunVoxelSweep(s);
+    case Job::kDamBreak:
+      return dbl ? RunSim<double>(s, end_time) : RunSim<float>(s, end_time);
+    case Job::kHydrostatic:
+      return dbl ? RunHydrostatic<double>(s) : RunHydrostatic<float>(s);
+    case Job::kVoxelSweep:
+      return RunVoxelSweep(s);
   }
   return {};
 }
@@ -370,8 +382,7 @@ std::vector<Setting> Settings(bool with_freezing) {
   for (double eta : {1e-2, 3e-3, 3e-4, 1e-4})
     add("eta", "eta " + fmt::format("{:g}", eta), [=](io::Scene& sc) { sc.solver.eta = eta, sc.solver.max_iterations = 1000; });
   for (double cfl : {0.2, 0.6}) add("cfl", fmt::format("CFL {:g}", cfl), [=](io::Scene& sc) { sc.solver.cfl = cfl; });
-  for (double dtm : {0.002, 0.01})
-    add("dt_max", fmt::format("dt_max {:g} ms", 1e3 * dtm), [=](io::Scene& sc) { sc.solver.dt_max = dtm; });
+  for (double dtm : {0.002, 0.01}) add("dt_max", fmt::format("dt_max {:g} ms", 1e3 * dtm), [=](io::Scene& sc) { sc.solver.dt_max = dtm; });
   for (int per_a : {14, 28}) add("spacing", fmt::format("a = {} d_p", per_a), none, per_a);
   add("min_iterations", "min 2 iterations (Ihmsen; the default is 3)", [](io::Scene& sc) { sc.solver.min_iterations = 2; });
   for (double w : {0.3, 0.7}) add("omega", fmt::format("omega {:g}", w), [=](io::Scene& sc) { sc.solver.omega = w; });
@@ -416,7 +427,9 @@ struct CsvColumn {
 std::vector<CsvColumn> CsvColumns() {
   const auto text = [](const char* k) { return [k](std::ostream& o, const json& r) { o << r.at(k).get<std::string>(); }; };
   const auto raw = [](const char* k) { return [k](std::ostream& o, const json& r) { o << r.at(k); }; };  // as JSON writes it
-  const auto real = [](const char* k, double missing) { return [k, missing](std::ostream& o, const json& r) { o << r.value(k, missing); }; };
+  const auto real = [](const char* k, double missing) {
+    return [k, missing](std::ostream& o, const json& r) { o << r.value(k, missing); };
+  };
   const auto count = [](const char* k) { return [k](std::ostream& o, const json& r) { o << r.value(k, 0LL); }; };
   const auto at = [](const char* k) { return [k](std::ostream& o, const json& r) { o << r.at(k).get<double>(); }; };
   return {{"group", text("group")},
@@ -496,7 +509,8 @@ int main(int argc, char** argv) {
     row["group"] = s.group, row["label"] = s.label;
     row["eta"] = s.scene.solver.eta, row["cfl"] = s.scene.solver.cfl, row["dt_max"] = s.scene.solver.dt_max;
     row["omega"] = s.scene.solver.omega, row["smoothing_ratio"] = s.scene.fluid.smoothing_ratio;
-    row["precision"] = std::string(rime::io::EnumName(s.scene.fluid.precision)), row["per_a"] = s.per_a, row["max_iterations"] = s.scene.solver.max_iterations;
+    row["precision"] = std::string(rime::io::EnumName(s.scene.fluid.precision)), row["per_a"] = s.per_a,
+    row["max_iterations"] = s.scene.solver.max_iterations;
     row["wall_s"] = Median(wall), row["cpu_s"] = Median(cpu), row["peak_rss_mib"] = Median(rss), row["repeats"] = int(wall.size());
     if (s.label.rfind("reference (", 0) == 0) ref = row;
     if (s.label == "freezing: reference") fref = row;
@@ -517,7 +531,8 @@ int main(int argc, char** argv) {
     double pos_diff = NAN;
     if (s.per_a == kBasePerA && base.contains("positions") && row.contains("positions") && !row["diverged"].get<bool>()) {
       std::map<long long, Vec3d> mine;
-      for (const auto& p : row["positions"]) mine[(long long)p[0].get<double>()] = {p[1].get<double>(), p[2].get<double>(), p[3].get<double>()};
+      for (const auto& p : row["positions"])
+        mine[(long long)p[0].get<double>()] = {p[1].get<double>(), p[2].get<double>(), p[3].get<double>()};
       std::vector<std::pair<double, long long>> by_x;
       std::map<long long, Vec3d> theirs;
       for (const auto& p : base["positions"]) {
@@ -579,12 +594,15 @@ int main(int argc, char** argv) {
 
   std::filesystem::remove(snapshot);
   const std::string load_after = test::LoadAverages();
-  std::printf("\nRime speed/accuracy study: dam break a = %.2f m (height 2a), %.2f s simulated, %d CPU threads, median of %d runs; "
-              "load average before %s, after %s\n",
-              kA, end_time, used_threads, repeats, load_before.c_str(), load_after.c_str());
-  std::printf("errors against the reference run of the same scene; front error = |Z - Z_ref| / Z_ref at 0.1 s intervals; "
-              "pos = mean displacement of the front's particles from the reference, in d_p; hydro%% = hydrostatic slope error "
-              "(column 0.5 m, same knobs), +- its noise (half the difference between the two halves of the averaging window); ice shape = symmetric mean nearest distance to the reference's ice, in d_p\n");
+  std::printf(
+      "\nRime speed/accuracy study: dam break a = %.2f m (height 2a), %.2f s simulated, %d CPU threads, median of %d runs; "
+      "load average before %s, after %s\n",
+      kA, end_time, used_threads, repeats, load_before.c_str(), load_after.c_str());
+  std::printf(
+      "errors against the reference run of the same scene; front error = |Z - Z_ref| / Z_ref at 0.1 s intervals; "
+      "pos = mean displacement of the front's particles from the reference, in d_p; hydro%% = hydrostatic slope error "
+      "(column 0.5 m, same knobs), +- its noise (half the difference between the two halves of the averaging window); ice shape = "
+      "symmetric mean nearest distance to the reference's ice, in d_p\n");
   std::printf("%-46s %7s %6s %7s %6s %6s %8s %8s %8s %8s %7s %7s %6s %6s %7s %5s %6s %6s\n", "setting", "water", "wall s", "CPU s", "steps",
               "iter", "MiB", "rho avg%", "rho max%", "meas avg%", "vol %", "front%", "max%", "pos", "hydro%", "+-", "ice", "shape");
   std::ofstream csv(out_dir + "/results.csv");
@@ -596,14 +614,14 @@ int main(int argc, char** argv) {
     const bool div = r.value("diverged", false);
     const double hydro = r.value("hydro_slope_error", NAN), hydro_noise = r.value("hydro_noise", NAN);
     const double shape = r.value("ice_shape_diff_dp", NAN);
-    std::printf("%-46s %7lld %6.2f %7.2f %6lld %6.1f %8.0f %8.3f %8.2f %9.3f %7.3f %7.2f %6.2f %6.2f %7.2f %5.2f %6s %6.2f%s\n",
-                r["label"].get<std::string>().c_str(), r.value("fluid", 0LL), r["wall_s"].get<double>(), r["cpu_s"].get<double>(),
-                r.value("steps", 0LL), r.value("mean_iterations", 0.0), r["peak_rss_mib"].get<double>(),
-                100 * r.value("mean_density_error", 0.0), 100 * r.value("max_density_error", 0.0),
-                100 * r.value("mean_measured_density_error", 0.0), 100 * r.value("volume_drift", 0.0), 100 * r["front_error_mean"].get<double>(),
-                100 * r["front_error_max"].get<double>(), r["front_position_diff_dp"].get<double>(),
-                100 * hydro, 100 * hydro_noise, r["group"] == "freezing" ? std::to_string(r.value("ice", 0LL)).c_str() : "-", shape,
-                div ? "  DIVERGED" : (r.value("hydro_diverged", false) ? "  hydrostatic column DIVERGED" : ""));
+    std::printf(
+        "%-46s %7lld %6.2f %7.2f %6lld %6.1f %8.0f %8.3f %8.2f %9.3f %7.3f %7.2f %6.2f %6.2f %7.2f %5.2f %6s %6.2f%s\n",
+        r["label"].get<std::string>().c_str(), r.value("fluid", 0LL), r["wall_s"].get<double>(), r["cpu_s"].get<double>(),
+        r.value("steps", 0LL), r.value("mean_iterations", 0.0), r["peak_rss_mib"].get<double>(), 100 * r.value("mean_density_error", 0.0),
+        100 * r.value("max_density_error", 0.0), 100 * r.value("mean_measured_density_error", 0.0), 100 * r.value("volume_drift", 0.0),
+        100 * r["front_error_mean"].get<double>(), 100 * r["front_error_max"].get<double>(), r["front_position_diff_dp"].get<double>(),
+        100 * hydro, 100 * hydro_noise, r["group"] == "freezing" ? std::to_string(r.value("ice", 0LL)).c_str() : "-", shape,
+        div ? "  DIVERGED" : (r.value("hydro_diverged", false) ? "  hydrostatic column DIVERGED" : ""));
     for (std::size_t c = 0; c < columns.size(); ++c) {
       if (c) csv << ",";
       columns[c].write(csv, r);
@@ -615,9 +633,10 @@ int main(int argc, char** argv) {
   }
   csv.close();
   if (!surface_rows.empty()) {
-    std::printf("\nReconstruction voxel size (freezing reference's %lld ice particles, ellipsoid field; error = distance of the mesh "
-                "from the level set at voxel %.2f d_p, at the mesh's vertices, in d_p; median of %d runs):\n",
-                surface_rows[0].value("ice", 0LL), kFinestVoxel, repeats);
+    std::printf(
+        "\nReconstruction voxel size (freezing reference's %lld ice particles, ellipsoid field; error = distance of the mesh "
+        "from the level set at voxel %.2f d_p, at the mesh's vertices, in d_p; median of %d runs):\n",
+        surface_rows[0].value("ice", 0LL), kFinestVoxel, repeats);
     std::printf("%-14s %10s %8s %8s %10s %10s %10s\n", "voxel / d_p", "wall s", "CPU s", "MiB", "triangles", "err mean", "err p95");
     std::ofstream scsv(out_dir + "/surface.csv");
     scsv << "voxel_ratio,voxel_size,wall_s,cpu_s,peak_rss_mib,triangles,error_mean_dp,error_p95_dp\n";
@@ -626,13 +645,20 @@ int main(int argc, char** argv) {
                   r["surface_cpu_s"].get<double>(), r["surface_peak_rss_mib"].get<double>(), r["triangles"].get<unsigned long long>(),
                   r["surface_error_mean_dp"].get<double>(), r["surface_error_p95_dp"].get<double>());
       scsv << r["voxel_ratio"] << "," << r["voxel_size"] << "," << r["wall_s"] << "," << r["surface_cpu_s"] << ","
-           << r["surface_peak_rss_mib"] << "," << r["triangles"] << "," << r["surface_error_mean_dp"] << ","
-           << r["surface_error_p95_dp"] << "\n";
+           << r["surface_peak_rss_mib"] << "," << r["triangles"] << "," << r["surface_error_mean_dp"] << "," << r["surface_error_p95_dp"]
+           << "\n";
     }
   }
-  json doc = {{"study", "dam break speed/accuracy"}, {"machine", test::MachineDescription()},
-              {"commit", test::SourceCommit(RIME_SOURCE_DIR)}, {"column_width_m", kA}, {"end_time_s", end_time}, {"threads", used_threads},
-              {"repeats", repeats}, {"load_average_before", load_before}, {"load_average_after", load_after}, {"runs", out},
+  json doc = {{"study", "dam break speed/accuracy"},
+              {"machine", test::MachineDescription()},
+              {"commit", test::SourceCommit(RIME_SOURCE_DIR)},
+              {"column_width_m", kA},
+              {"end_time_s", end_time},
+              {"threads", used_threads},
+              {"repeats", repeats},
+              {"load_average_before", load_before},
+              {"load_average_after", load_after},
+              {"runs", out},
               {"voxel_sweep", surface_rows}};
   std::ofstream(out_dir + "/results.json") << doc.dump(2) << "\n";
   std::printf("wrote %s/results.csv and %s/results.json\n", out_dir.c_str(), out_dir.c_str());

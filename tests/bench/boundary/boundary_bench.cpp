@@ -34,7 +34,6 @@ using Clock = std::chrono::steady_clock;
 
 double Seconds(Clock::time_point a, Clock::time_point b) { return std::chrono::duration<double>(b - a).count(); }
 
-
 struct Case {
   std::string name;
   std::function<io::TriMesh()> load;  // mesh in place (timed separately)
@@ -103,7 +102,8 @@ int main(int argc, char** argv) {
   std::vector<Case> cases;
   const fs::path bunny = mesh_dir / "stanford-bunny.obj";
   if (fs::exists(bunny)) {
-    cases.push_back({"bunny 0.5 m, d_p 5 mm", [bunny] {
+    cases.push_back({"bunny 0.5 m, d_p 5 mm",
+                     [bunny] {
                        io::TriMesh m = io::ImportMesh(bunny);
                        io::Transform t;  // the bunny is about 0.16 m and y-up: scale its largest extent to 0.5 m
                        t.up_axis = rime::io::UpAxis::kY;
@@ -123,19 +123,24 @@ int main(int argc, char** argv) {
   const double load_start = test::LoadAverage();
   fmt::print("rime-boundary sampling + Akinci volumes, CPU, {} threads, median of {} runs (h = d_p, d_b = d_p/2), load average {:.2f}\n",
              exec::CpuThreads(), repeats, load_start);
-  fmt::print("| {:<28} | {:>9} | {:>9} | {:>8} | {:>8} | {:>8} | {:>8} | {:>9} | {:>10} |\n", "case", "triangles", "particles",
-             "load s", "sample s", "volume s", "total s", "M part/s", "M/CPU-s");
+  fmt::print("| {:<28} | {:>9} | {:>9} | {:>8} | {:>8} | {:>8} | {:>8} | {:>9} | {:>10} |\n", "case", "triangles", "particles", "load s",
+             "sample s", "volume s", "total s", "M part/s", "M/CPU-s");
   fmt::print("|{:-<30}|{:->11}|{:->11}|{:->10}|{:->10}|{:->10}|{:->10}|{:->11}|{:->12}|\n", "", "", "", "", "", "", "", "", "");
   nlohmann::json results = nlohmann::json::array();
   for (const Case& c : cases)
     if (c.name.find(only) != std::string::npos) results.push_back(RunCase(c, repeats));
-  fmt::print("(load = mesh file import or procedural tessellation, not included in M part/s; M/CPU-s = particles per\n"
-             " second of process CPU time over all threads, which stays meaningful on a machine shared with other work)\n");
+  fmt::print(
+      "(load = mesh file import or procedural tessellation, not included in M part/s; M/CPU-s = particles per\n"
+      " second of process CPU time over all threads, which stays meaningful on a machine shared with other work)\n");
   const double load_end = test::LoadAverage();
   fmt::print("load average at the end: {:.2f}\n", load_end);
-  std::ofstream(json_path) << nlohmann::json{{"benchmark", "boundary"}, {"machine", test::MachineDescription()},
-                                             {"commit", test::SourceCommit(RIME_SOURCE_DIR)}, {"threads", exec::CpuThreads()}, {"repeats", repeats},
-                                             {"load_average_start", load_start}, {"load_average_end", load_end},
+  std::ofstream(json_path) << nlohmann::json{{"benchmark", "boundary"},
+                                             {"machine", test::MachineDescription()},
+                                             {"commit", test::SourceCommit(RIME_SOURCE_DIR)},
+                                             {"threads", exec::CpuThreads()},
+                                             {"repeats", repeats},
+                                             {"load_average_start", load_start},
+                                             {"load_average_end", load_end},
                                              {"results", results}}
                                   .dump(2)
                            << "\n";

@@ -76,8 +76,8 @@ int main(int argc, char** argv) {
   nlohmann::json results = nlohmann::json::array();
   fmt::print("rime-clean default chain, {} thread(s), median of {} run(s), decimation {}{}\n", threads, runs, decimate_method,
              remesh ? ", with remeshing" : "");
-  fmt::print("{:>6} {:>9} {:>9} {:>7} {:>7} {:>8} {:>8} {:>8} {:>12}  per operation (CPU s)\n", "shape", "tris in", "tris out",
-             "read s", "write s", "clean s", "cpu s", "k tri/s", "k tri/cpu-s");
+  fmt::print("{:>6} {:>9} {:>9} {:>7} {:>7} {:>8} {:>8} {:>8} {:>12}  per operation (CPU s)\n", "shape", "tris in", "tris out", "read s",
+             "write s", "clean s", "cpu s", "k tri/s", "k tri/cpu-s");
   for (const std::string& shape : shapes)
     for (std::size_t size : sizes) {
       io::TriMesh mesh = shape == "ball" ? clean::procedural::NoisyBall(size, 1) : clean::procedural::NoisyTorus(size, 1);
@@ -142,8 +142,8 @@ int main(int argc, char** argv) {
                     {"hausdorff_mean_edges", h / last.before.mean_edge_length},
                     {"mean_distance_m", 0.5 * (in_out_mean + out_in_mean)},
                     {"mean_input_edge_m", last.before.mean_edge_length}};
-        fmt::print("{:>6} Hausdorff {:.3g} m = {:.4f} mean input edges, mean distance {:.3g} m\n", "", h,
-                   h / last.before.mean_edge_length, 0.5 * (in_out_mean + out_in_mean));
+        fmt::print("{:>6} Hausdorff {:.3g} m = {:.4f} mean input edges, mean distance {:.3g} m\n", "", h, h / last.before.mean_edge_length,
+                   0.5 * (in_out_mean + out_in_mean));
       }
       fmt::print("{:>6} OBJ read {:.2f} s, write {:.2f} s; binary PLY read {:.2f} s, write {:.2f} s\n", "", test::Median(read_obj_s),
                  test::Median(write_obj_s), test::Median(read_s), test::Median(write_s));
@@ -168,9 +168,15 @@ int main(int argc, char** argv) {
                          {"distance", distance},
                          {"report", clean::ToJson(last)}});
     }
-  WriteFileAtomically(json_path, nlohmann::json({{"benchmark", "rime-clean default chain"}, {"machine", test::MachineDescription()},
-                                                 {"commit", test::SourceCommit(RIME_SOURCE_DIR)}, {"threads", threads}, {"remesh", remesh},
-                                                 {"decimate_method", decimate_method}, {"results", results}}).dump(2) + "\n");
+  WriteFileAtomically(json_path, nlohmann::json({{"benchmark", "rime-clean default chain"},
+                                                 {"machine", test::MachineDescription()},
+                                                 {"commit", test::SourceCommit(RIME_SOURCE_DIR)},
+                                                 {"threads", threads},
+                                                 {"remesh", remesh},
+                                                 {"decimate_method", decimate_method},
+                                                 {"results", results}})
+                                         .dump(2) +
+                                     "\n");
   fmt::print("wrote {}\n", json_path);
   return 0;
 }

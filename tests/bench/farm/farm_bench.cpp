@@ -182,12 +182,14 @@ int main(int argc, char** argv) {
       if (group == "surface") latency.push_back(t.end - frame_mtime(std::min(frames - 1, (k + 1) * chunk - 1)));
     }
     const Stats w = Summarize(wait), r = Summarize(run), tl = Summarize(tool), o = Summarize(overhead), l = Summarize(latency);
-    std::printf("%-9s %5zu %7.2f/%6.2f %7.2f/%6.2f %9.3f %7.2f/%6.2f %11s\n", group.c_str(), r.count, w.mean, w.max, r.mean, r.max, tl.mean, o.mean,
-                o.max, l.count ? fmt::format("{:.2f}/{:.2f}", l.mean, l.max).c_str() : "");
+    std::printf("%-9s %5zu %7.2f/%6.2f %7.2f/%6.2f %9.3f %7.2f/%6.2f %11s\n", group.c_str(), r.count, w.mean, w.max, r.mean, r.max, tl.mean,
+                o.mean, o.max, l.count ? fmt::format("{:.2f}/{:.2f}", l.mean, l.max).c_str() : "");
     groups[group] = {{"submit_to_start_s", ToJson(w)}, {"start_to_end_s", ToJson(r)}, {"tool_s", ToJson(tl)}, {"overhead_s", ToJson(o)}};
     if (l.count) groups[group]["frame_latency_s"] = ToJson(l);
   }
-  std::printf("(frame latency: cleanup = its start after the frame's surface task ended; surface = its end after the simulation wrote the frame)\n");
+  std::printf(
+      "(frame latency: cleanup = its start after the frame's surface task ended; surface = its end after the simulation wrote the "
+      "frame)\n");
   // Streaming: surface tasks that finished before the simulation did.
   int streamed = 0;
   const double sim_end = tasks["sim"].count(-1) ? tasks["sim"][-1].end : -1;

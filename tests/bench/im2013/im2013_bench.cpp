@@ -160,7 +160,7 @@ struct Result {
   double sim_time = 0, wall_s = 0;
   std::int64_t steps = 0, water_initial = 0;
   std::int64_t ice = 0, ice_components = 0, speck_components = 0, specks = 0;
-  std::int64_t ice_on_sphere = 0;     // attached ice within 6 d_p of the sphere's surface (roughness input)
+  std::int64_t ice_on_sphere = 0;  // attached ice within 6 d_p of the sphere's surface (roughness input)
   // The same roughness measured on the mesh rime-surface reconstructs from the ice on the sphere
   // (default ice settings: ellipsoids with the stored anisotropy, voxel d_p / 2).
   double surface_roughness_mm = 0, surface_thickness_mm = 0;
@@ -331,8 +331,7 @@ Result Run(const std::string& which, const Variant& v, bool full, const fs::path
     if (on_sphere) {
       r.ice_sphere_attached += std::int64_t(members.size());
       for (int i : members) ice_on_sphere_component[i] = 1;
-    }
-    else if (attached) r.ice_ground_only += std::int64_t(members.size());
+    } else if (attached) r.ice_ground_only += std::int64_t(members.size());
   }
 
   // Water lost to splashing: removed by the domain, or at the end farther than 3 d_p from every
@@ -455,8 +454,8 @@ void Picture(const Result& r, const fs::path& path) {
   };
   auto layer = [&](const std::vector<Vec3d>& p, std::array<std::uint8_t, 3> c, int rad, bool side) {
     for (const Vec3d& q : p) {
-      if (side && std::fabs(q.y) > 0.1) continue;  // side view: a 20 cm slab through the sphere's centre
-      if (!side && q.z < 0.01 && c[0] == 200) continue;  // top view: leave the ground out
+      if (side && std::fabs(q.y) > 0.1) continue;                          // side view: a 20 cm slab through the sphere's centre
+      if (!side && q.z < 0.01 && c[0] == 200) continue;                    // top view: leave the ground out
       put(q.x, side ? q.z - 0.7 : q.y, side ? kPanel + kGap : 0, c, rad);  // side: z from -0.1 m up
     }
   };
@@ -513,8 +512,10 @@ void SurfacePicture(const Result& r, const fs::path& path) {
       if (Dot(n, toward_viewer) < 0) n = -n;  // light the side that faces the viewer
       double x[3], y[3], d[3];
       project(p0, x[0], y[0], d[0]), project(p1, x[1], y[1], d[1]), project(p2, x[2], y[2], d[2]);
-      const int x0 = std::max(0, int(std::floor(std::min({x[0], x[1], x[2]})))), x1 = std::min(kPanel - 1, int(std::ceil(std::max({x[0], x[1], x[2]}))));
-      const int y0 = std::max(0, int(std::floor(std::min({y[0], y[1], y[2]})))), y1 = std::min(kH - 1, int(std::ceil(std::max({y[0], y[1], y[2]}))));
+      const int x0 = std::max(0, int(std::floor(std::min({x[0], x[1], x[2]})))),
+                x1 = std::min(kPanel - 1, int(std::ceil(std::max({x[0], x[1], x[2]}))));
+      const int y0 = std::max(0, int(std::floor(std::min({y[0], y[1], y[2]})))),
+                y1 = std::min(kH - 1, int(std::ceil(std::max({y[0], y[1], y[2]}))));
       const double area = (x[1] - x[0]) * (y[2] - y[0]) - (x[2] - x[0]) * (y[1] - y[0]);
       if (std::fabs(area) < 1e-12) continue;
       for (int Y = y0; Y <= y1; ++Y)
@@ -530,7 +531,6 @@ void SurfacePicture(const Result& r, const fs::path& path) {
   }
   WritePanels(path, img);
 }
-
 
 // One result's measures in the JSON's order, each written once for both files: CSV columns are
 // the ones not marked json_only, in the same order; text values are quoted in the JSON.
@@ -609,10 +609,10 @@ int main(int argc, char** argv) {
       std::printf("  %s/%s done in %.0f s\n", s.c_str(), v.label.c_str(), results.back().wall_s);
       std::fflush(stdout);
     }
-  std::printf("\n%-6s %-9s %6s %6s %7s %7s %7s %7s %7s %7s %7s %7s %7s %7s %7s %7s %6s\n", "scene", "method", "water", "ice", "on", "ground",
-              "bits", "specks", "speck", "removed", "airborn", "off-obj", "rough", "thick", "s-rough", "s-thick", "wall");
-  std::printf("%-6s %-9s %6s %6s %7s %7s %7s %7s %7s %7s %7s %7s %7s %7s %7s %7s %6s\n", "", "", "start", "", "sphere", "only", "<=3", "(ptcl)", "groups", "",
-              "", "", "mm", "mm", "mm", "mm", "s");
+  std::printf("\n%-6s %-9s %6s %6s %7s %7s %7s %7s %7s %7s %7s %7s %7s %7s %7s %7s %6s\n", "scene", "method", "water", "ice", "on",
+              "ground", "bits", "specks", "speck", "removed", "airborn", "off-obj", "rough", "thick", "s-rough", "s-thick", "wall");
+  std::printf("%-6s %-9s %6s %6s %7s %7s %7s %7s %7s %7s %7s %7s %7s %7s %7s %7s %6s\n", "", "", "start", "", "sphere", "only", "<=3",
+              "(ptcl)", "groups", "", "", "", "mm", "mm", "mm", "mm", "s");
   std::ofstream csv(out / "results.csv");
   std::string header;
   for (const Field& f : Fields(Result{}))
@@ -622,11 +622,11 @@ int main(int argc, char** argv) {
                                  rime::test::MachineDescription(), rime::test::SourceCommit(RIME_SOURCE_DIR));
   for (std::size_t k = 0; k < results.size(); ++k) {
     const Result& r = results[k];
-    std::printf("%-6s %-9s %6lld %6lld %7lld %7lld %7lld %7lld %7lld %7lld %7lld %7lld %7.1f %7.1f %7.1f %7.1f %6.0f%s\n", r.scene.c_str(), r.method.c_str(),
-                (long long)r.water_initial, (long long)r.ice, (long long)r.ice_sphere_attached, (long long)r.ice_ground_only,
-                (long long)r.bits, (long long)r.specks, (long long)r.speck_components, (long long)r.removed, (long long)r.airborne, (long long)r.off_object,
-                r.roughness_mm, r.mean_thickness_mm, r.surface_roughness_mm, r.surface_thickness_mm, r.wall_s,
-                r.ok ? "" : "  FAILED");
+    std::printf("%-6s %-9s %6lld %6lld %7lld %7lld %7lld %7lld %7lld %7lld %7lld %7lld %7.1f %7.1f %7.1f %7.1f %6.0f%s\n", r.scene.c_str(),
+                r.method.c_str(), (long long)r.water_initial, (long long)r.ice, (long long)r.ice_sphere_attached,
+                (long long)r.ice_ground_only, (long long)r.bits, (long long)r.specks, (long long)r.speck_components, (long long)r.removed,
+                (long long)r.airborne, (long long)r.off_object, r.roughness_mm, r.mean_thickness_mm, r.surface_roughness_mm,
+                r.surface_thickness_mm, r.wall_s, r.ok ? "" : "  FAILED");
     std::string row, object;
     for (const Field& f : Fields(r)) {
       if (!f.json_only) row += (row.empty() ? "" : ",") + f.value;

@@ -29,7 +29,8 @@ struct Result {
   std::string name;
   std::int64_t particles = 0, boundary = 0;
   std::int64_t ice = 0;
-  double ms_step = 0, cpu_ms_step = 0, us_particle_step = 0, neighbors = 0, forces = 0, pressure = 0, integration = 0, freezing = 0, iterations = 0;
+  double ms_step = 0, cpu_ms_step = 0, us_particle_step = 0, neighbors = 0, forces = 0, pressure = 0, integration = 0, freezing = 0,
+         iterations = 0;
   double grid = 0, fluid_lists = 0, boundary_lists = 0, rest = 0;
   double memory_mib = 0;
 };
@@ -157,7 +158,8 @@ Result Run(const std::string& name, const io::Scene& scene, int warmup, int step
   r.ms_step = Median(ms);
   r.cpu_ms_step = Median(cpu);
   r.us_particle_step = 1e3 * r.ms_step / double(r.particles);
-  r.neighbors = Median(nb), r.forces = Median(fo), r.pressure = Median(pr), r.integration = Median(in), r.freezing = Median(fz), r.iterations = Median(it);
+  r.neighbors = Median(nb), r.forces = Median(fo), r.pressure = Median(pr), r.integration = Median(in), r.freezing = Median(fz),
+  r.iterations = Median(it);
   r.grid = Median(gr), r.fluid_lists = Median(fl), r.boundary_lists = Median(bl), r.rest = Median(re);
   return r;
 }
@@ -198,14 +200,13 @@ int main(int argc, char** argv) {
     io::Scene scene;
     bool frozen = false;
   };
-  const std::vector<Case> cases = {
-      {"dam break 50k", DamBreak(dp, 1.0, {"gravity"})},
-      {"dam break 50k, min 2 iterations", MinIterations(DamBreak(dp, 1.0, {"gravity"}), 2)},
-      {"dam break 50k + viscosity", DamBreak(dp, 1.0, {"gravity", "viscosity"})},
-      {"dam break 50k + surface tension", DamBreak(dp, 1.0, {"gravity", "surface_tension"})},
-      {"dam break 50k + viscosity + freezing", DamBreak(dp, 1.0, {"gravity", "viscosity", "freezing"})},
-      {"50k, 99 % frozen + viscosity + freezing", MostlyFrozen(dp), true},
-      {"dam break 200k", DamBreak(dp, 1.6, {"gravity"})}};
+  const std::vector<Case> cases = {{"dam break 50k", DamBreak(dp, 1.0, {"gravity"})},
+                                   {"dam break 50k, min 2 iterations", MinIterations(DamBreak(dp, 1.0, {"gravity"}), 2)},
+                                   {"dam break 50k + viscosity", DamBreak(dp, 1.0, {"gravity", "viscosity"})},
+                                   {"dam break 50k + surface tension", DamBreak(dp, 1.0, {"gravity", "surface_tension"})},
+                                   {"dam break 50k + viscosity + freezing", DamBreak(dp, 1.0, {"gravity", "viscosity", "freezing"})},
+                                   {"50k, 99 % frozen + viscosity + freezing", MostlyFrozen(dp), true},
+                                   {"dam break 200k", DamBreak(dp, 1.6, {"gravity"})}};
   for (const Case& c : cases) {
     if (!only.empty() && std::find(only.begin(), only.end(), c.name) == only.end()) continue;
     if (only.empty() && quick && c.name == "dam break 200k") continue;
@@ -216,48 +217,74 @@ int main(int argc, char** argv) {
     return 2;
   }
   const double load_after = LoadAverage();
-  std::printf("\nRime simulation benchmark, %d CPU threads, float, dt = 1 ms, eta = 0.1 %%, median of %d runs of %d steps after %d warm-up steps; "
-              "load average %.2f before, %.2f after\n",
-              exec::CpuThreads(), repeats, steps, warmup, load_before, load_after);
-  std::printf("milliseconds per step (wall; CPUms/st: CPU time of all threads); neighbour search = grid (binning, reordering) + ff and fb lists (each with its kernel values and "
-              "gradients); rest = step - neighbours - pressure - freezing\n");
+  std::printf(
+      "\nRime simulation benchmark, %d CPU threads, float, dt = 1 ms, eta = 0.1 %%, median of %d runs of %d steps after %d warm-up steps; "
+      "load average %.2f before, %.2f after\n",
+      exec::CpuThreads(), repeats, steps, warmup, load_before, load_after);
+  std::printf(
+      "milliseconds per step (wall; CPUms/st: CPU time of all threads); neighbour search = grid (binning, reordering) + ff and fb lists "
+      "(each with its kernel values and "
+      "gradients); rest = step - neighbours - pressure - freezing\n");
   std::printf("%-40s %6s %6s %7s %8s %8s %8s %6s %6s %6s %7s %8s %8s %6s %5s %7s %5s\n", "case", "water", "ice", "boundary", "ms/step",
-              "CPUms/st", "us/p-step",
-              "grid", "ff", "fb", "neighb.", "pressure", "freezing", "rest", "iter.", "peakMiB", "frz%");
+              "CPUms/st", "us/p-step", "grid", "ff", "fb", "neighb.", "pressure", "freezing", "rest", "iter.", "peakMiB", "frz%");
   nlohmann::json out = nlohmann::json::array();
   for (const Result& r : results) {
     std::printf("%-40s %6lld %6lld %7lld %8.2f %8.2f %8.3f %6.2f %6.2f %6.2f %7.2f %8.2f %8.2f %6.2f %5.2f %7.0f %5.1f\n", r.name.c_str(),
-                (long long)r.particles, (long long)r.ice, (long long)r.boundary, r.ms_step, r.cpu_ms_step, r.us_particle_step, r.grid, r.fluid_lists,
-                r.boundary_lists, r.neighbors, r.pressure, r.freezing, r.rest, r.iterations, r.memory_mib,
+                (long long)r.particles, (long long)r.ice, (long long)r.boundary, r.ms_step, r.cpu_ms_step, r.us_particle_step, r.grid,
+                r.fluid_lists, r.boundary_lists, r.neighbors, r.pressure, r.freezing, r.rest, r.iterations, r.memory_mib,
                 100 * r.freezing / r.ms_step);
-    out.push_back({{"case", r.name}, {"water_particles", r.particles}, {"ice_particles", r.ice}, {"boundary_particles", r.boundary},
-                   {"ms_per_step", r.ms_step}, {"cpu_ms_per_step", r.cpu_ms_step}, {"us_per_particle_step", r.us_particle_step}, {"neighbor_search_ms", r.neighbors},
-                   {"grid_build_ms", r.grid}, {"fluid_lists_ms", r.fluid_lists}, {"boundary_lists_ms", r.boundary_lists},
-                   {"non_pressure_ms", r.forces}, {"pressure_solve_ms", r.pressure},
-                   {"integration_ms", r.integration}, {"freezing_ms", r.freezing}, {"rest_ms", r.rest}, {"pressure_iterations", r.iterations},
-                   {"peak_memory_mib", r.memory_mib}, {"threads", exec::CpuThreads()}, {"warmup_steps", warmup}, {"timed_steps", steps},
-                   {"repeats", repeats}, {"load_average_before", load_before}, {"load_average_after", load_after}});
+    out.push_back({{"case", r.name},
+                   {"water_particles", r.particles},
+                   {"ice_particles", r.ice},
+                   {"boundary_particles", r.boundary},
+                   {"ms_per_step", r.ms_step},
+                   {"cpu_ms_per_step", r.cpu_ms_step},
+                   {"us_per_particle_step", r.us_particle_step},
+                   {"neighbor_search_ms", r.neighbors},
+                   {"grid_build_ms", r.grid},
+                   {"fluid_lists_ms", r.fluid_lists},
+                   {"boundary_lists_ms", r.boundary_lists},
+                   {"non_pressure_ms", r.forces},
+                   {"pressure_solve_ms", r.pressure},
+                   {"integration_ms", r.integration},
+                   {"freezing_ms", r.freezing},
+                   {"rest_ms", r.rest},
+                   {"pressure_iterations", r.iterations},
+                   {"peak_memory_mib", r.memory_mib},
+                   {"threads", exec::CpuThreads()},
+                   {"warmup_steps", warmup},
+                   {"timed_steps", steps},
+                   {"repeats", repeats},
+                   {"load_average_before", load_before},
+                   {"load_average_after", load_after}});
   }
-  std::printf("%-40s %6d %6s %7s %4.0f-%3.0f %8s %8s %6s %6s %6s %3.0f-%3.0f %8.0f   (SPlisHSPlasH IISPH, same scene and machine kind, 2 threads, "
-              "min 2 iterations, 159k boundary particles; PERFORMANCE.md)\n",
-              "SPlisHSPlasH reference", 50653, "", "", kReferenceStepMs[0], kReferenceStepMs[1], "", "", "", "", "", kReferenceNeighborMs[0],
-              kReferenceNeighborMs[1], kReferencePressureMs);
-  out.push_back({{"case", "SPlisHSPlasH reference (PERFORMANCE.md)"}, {"ms_per_step_min", kReferenceStepMs[0]}, {"ms_per_step_max", kReferenceStepMs[1]},
-                 {"neighbor_search_ms_min", kReferenceNeighborMs[0]}, {"neighbor_search_ms_max", kReferenceNeighborMs[1]},
-                 {"pressure_solve_ms", kReferencePressureMs}, {"pressure_iterations", 2}});
+  std::printf(
+      "%-40s %6d %6s %7s %4.0f-%3.0f %8s %8s %6s %6s %6s %3.0f-%3.0f %8.0f   (SPlisHSPlasH IISPH, same scene and machine kind, 2 threads, "
+      "min 2 iterations, 159k boundary particles; PERFORMANCE.md)\n",
+      "SPlisHSPlasH reference", 50653, "", "", kReferenceStepMs[0], kReferenceStepMs[1], "", "", "", "", "", kReferenceNeighborMs[0],
+      kReferenceNeighborMs[1], kReferencePressureMs);
+  out.push_back({{"case", "SPlisHSPlasH reference (PERFORMANCE.md)"},
+                 {"ms_per_step_min", kReferenceStepMs[0]},
+                 {"ms_per_step_max", kReferenceStepMs[1]},
+                 {"neighbor_search_ms_min", kReferenceNeighborMs[0]},
+                 {"neighbor_search_ms_max", kReferenceNeighborMs[1]},
+                 {"pressure_solve_ms", kReferencePressureMs},
+                 {"pressure_iterations", 2}});
   auto find = [&](const std::string& name) -> const Result* {
     for (const Result& r : results)
       if (r.name == name) return &r;
     return nullptr;
   };
   if (const Result* two = find("dam break 50k, min 2 iterations"))
-    std::printf("min 2 iterations: %.3f us per particle-step (target <= 0.55), %.1f-%.1fx SPlisHSPlasH's step; lists %.2f ms (target <= 5), "
-                "neighbour search %.1f-%.1fx SPlisHSPlasH's\n",
-                two->us_particle_step, kReferenceStepMs[0] / two->ms_step, kReferenceStepMs[1] / two->ms_step,
-                two->fluid_lists + two->boundary_lists, kReferenceNeighborMs[0] / two->neighbors, kReferenceNeighborMs[1] / two->neighbors);
+    std::printf(
+        "min 2 iterations: %.3f us per particle-step (target <= 0.55), %.1f-%.1fx SPlisHSPlasH's step; lists %.2f ms (target <= 5), "
+        "neighbour search %.1f-%.1fx SPlisHSPlasH's\n",
+        two->us_particle_step, kReferenceStepMs[0] / two->ms_step, kReferenceStepMs[1] / two->ms_step,
+        two->fluid_lists + two->boundary_lists, kReferenceNeighborMs[0] / two->neighbors, kReferenceNeighborMs[1] / two->neighbors);
   const Result* liquid = find("dam break 50k + viscosity + freezing");
   const Result* frozen = find("50k, 99 % frozen + viscosity + freezing");
-  if (liquid) std::printf("freezing share of the liquid freezing step: %.1f %% (target <= 25 %%)\n", 100 * liquid->freezing / liquid->ms_step);
+  if (liquid)
+    std::printf("freezing share of the liquid freezing step: %.1f %% (target <= 25 %%)\n", 100 * liquid->freezing / liquid->ms_step);
   if (liquid && frozen)
     std::printf("mostly frozen step / liquid step: %.1f %% (target <= 15 %%)\n", 100 * frozen->ms_step / liquid->ms_step);
   std::ofstream(json_path) << out.dump(2) << "\n";

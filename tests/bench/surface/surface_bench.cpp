@@ -54,8 +54,7 @@ surface::ParticleSet IceShape(std::size_t n, bool sheet) {
     std::uniform_real_distribution<double> jitter(-0.05, 0.05);
     for (int i = 0; i < side; ++i)
       for (int j = 0; j < side; ++j)
-        for (int k = 0; k < 2; ++k)
-          set.positions.push_back(Vec3d(i + jitter(rng), j + jitter(rng), k + jitter(rng)) * kSpacing);
+        for (int k = 0; k < 2; ++k) set.positions.push_back(Vec3d(i + jitter(rng), j + jitter(rng), k + jitter(rng)) * kSpacing);
     surface::Settings settings;
     settings.lambda = 0;
     set.stored_anisotropy = surface::Prepare(set, settings, kSpacing / 2).D;
@@ -247,7 +246,10 @@ int main(int argc, char** argv) {
     }
   }
   nlohmann::json results = nlohmann::json::array();
-  std::printf("threads: %d, voxel = spacing/2, shape: %s, median of %d runs (by wall time); M/cpu-s = particles per CPU-second (user+sys, robust to a shared machine)\n", threads, sheet ? "jittered two-layer ice sheet" : "jittered ice ball", runs);
+  std::printf(
+      "threads: %d, voxel = spacing/2, shape: %s, median of %d runs (by wall time); M/cpu-s = particles per CPU-second (user+sys, robust "
+      "to a shared machine)\n",
+      threads, sheet ? "jittered two-layer ice sheet" : "jittered ice ball", runs);
   // prepare = centre smoothing + D (rime only), field = rasterizing the level set.
   std::printf("%-24s %10s %9s %9s %9s %9s %9s %10s %9s %12s %11s %10s %8s\n", "method", "particles", "wall s", "prepare s", "field s",
               "mesh s", "cpu s", "M part/s", "per core", "M/cpu-s", "triangles", "peak MB", "est. MB");  // MB = 1e6 bytes
@@ -277,8 +279,8 @@ int main(int argc, char** argv) {
       const double rate = double(set.size()) / m.seconds / 1e6;
       const double cpu_rate = double(set.size()) / m.cpu_seconds / 1e6;
       std::printf("%-24s %10zu %9.3f %9.3f %9.3f %9.3f %9.3f %10.3f %9.3f %12.3f %11llu %10.0f %8.0f  load %.1f\n", name, set.size(),
-                  m.seconds, m.prepare, m.rasterize, m.mesh, m.cpu_seconds, rate, rate / threads, cpu_rate,
-                  (unsigned long long)m.triangles, peak / 1e6, m.estimate_bytes / 1e6, load[0]);
+                  m.seconds, m.prepare, m.rasterize, m.mesh, m.cpu_seconds, rate, rate / threads, cpu_rate, (unsigned long long)m.triangles,
+                  peak / 1e6, m.estimate_bytes / 1e6, load[0]);
       std::fflush(stdout);
       results.push_back({{"method", name},
                          {"particles", set.size()},
@@ -300,9 +302,9 @@ int main(int argc, char** argv) {
                          {"note", "peak memory includes the generated particle set (~100 bytes/particle)"}});
     }
   }
-  const nlohmann::json document = {{"benchmark", "surface"}, {"machine", rime::test::MachineDescription()},
-                                   {"commit", rime::test::SourceCommit(RIME_SOURCE_DIR)}, {"threads", threads},
-                                   {"shape", sheet ? "sheet" : "ball"}, {"results", results}};
+  const nlohmann::json document = {
+      {"benchmark", "surface"}, {"machine", rime::test::MachineDescription()}, {"commit", rime::test::SourceCommit(RIME_SOURCE_DIR)},
+      {"threads", threads},     {"shape", sheet ? "sheet" : "ball"},           {"results", results}};
   std::ofstream(json_path) << document.dump(2) << "\n";
   std::printf("wrote %s\n", json_path.c_str());
   return 0;

@@ -108,8 +108,9 @@ TEST_F(RimeBoundaryTool, BadInputExitsWithCode3AndNoOutput) {
   ExpectBadInput(tetra + o + " --spacing 0.001 --max-particles 1000", "more than the maximum", out);
   ExpectBadInput(tetra + o + " --spacing 1e-9", "more than the maximum", out);
   // A scene whose second solid is bad writes nothing, not even the good first solid.
-  Write("bad_scene.toml", "[[solid]]\nname = \"floor\"\nshape = \"plane\"\nsize = [1, 1, 0.1]\n\n"
-                          "[[solid]]\nname = \"prop\"\nshape = \"mesh\"\nmesh = \"nowhere.stl\"\n");
+  Write("bad_scene.toml",
+        "[[solid]]\nname = \"floor\"\nshape = \"plane\"\nsize = [1, 1, 0.1]\n\n"
+        "[[solid]]\nname = \"prop\"\nshape = \"mesh\"\nmesh = \"nowhere.stl\"\n");
   ExpectBadInput((dir_ / "bad_scene.toml").string() + " -o " + (dir_ / "scene_out").string(), "nowhere.stl", dir_ / "scene_out");
 }
 
@@ -124,8 +125,8 @@ namespace {
 
 TEST_F(RimeBoundaryTool, RefusesAboveTheMemoryBudgetWithoutOutput) {
   // A unit tetrahedron at d_b = 1 mm: about 2.4 M particles, hundreds of MB.
-  const Result mesh = Run((dir_ / "tetra.obj").string() + " -o " + (dir_ / "tetra.h5part").string() +
-                          " --spacing 0.002 --memory-budget 1M");
+  const Result mesh =
+      Run((dir_ / "tetra.obj").string() + " -o " + (dir_ / "tetra.h5part").string() + " --spacing 0.002 --memory-budget 1M");
   EXPECT_EQ(mesh.code, 10) << mesh.err;
   EXPECT_NE(mesh.err.find("rime-boundary: error: needs about "), std::string::npos) << mesh.err;
   EXPECT_NE(mesh.err.find(" triangles and 2.37 M particles (" + (dir_ / "tetra.obj").string() +
@@ -159,16 +160,16 @@ TEST_F(RimeBoundaryTool, SandboxRefusesSceneMeshesOutsideIt) {
   const std::string box = (dir_ / "box").string();
   const auto scene_with_mesh = [&](const std::string& mesh) {
     std::ofstream(dir_ / "box" / "scene.toml") << "[water]\nspacing = 0.05\n\n[[solid]]\nname = \"prop\"\nshape = \"mesh\"\nmesh = \""
-                                                << mesh << "\"\n";
+                                               << mesh << "\"\n";
   };
-  for (const std::string& mesh : {std::string("../outside/tetra.obj"), (dir_ / "outside" / "tetra.obj").string(), std::string("link.obj")}) {
+  for (const std::string& mesh :
+       {std::string("../outside/tetra.obj"), (dir_ / "outside" / "tetra.obj").string(), std::string("link.obj")}) {
     SCOPED_TRACE(mesh);
     scene_with_mesh(mesh);
     const Result r = Run(box + "/scene.toml -o " + box + "/boundary --sandbox " + box);
     EXPECT_EQ(r.code, 3) << r.err;
     EXPECT_NE(r.err.find(box + "/scene.toml: solid 'prop' mesh "), std::string::npos) << r.err;
-    EXPECT_NE(r.err.find("resolves to " + (dir_ / "outside" / "tetra.obj").string() + ", outside the sandbox " + box),
-              std::string::npos)
+    EXPECT_NE(r.err.find("resolves to " + (dir_ / "outside" / "tetra.obj").string() + ", outside the sandbox " + box), std::string::npos)
         << r.err;
     EXPECT_FALSE(fs::exists(dir_ / "box" / "boundary"));
   }

@@ -37,8 +37,8 @@ class CleanTool : public ::testing::Test {
  protected:
   void SetUp() override {
     if (!fs::exists(kTool)) GTEST_SKIP() << "rime-clean not built at " << kTool;
-    dir_ = fs::temp_directory_path() / ("rime_clean_tool_" + std::to_string(::getpid()) + "_" +
-                                        ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    dir_ = fs::temp_directory_path() /
+           ("rime_clean_tool_" + std::to_string(::getpid()) + "_" + ::testing::UnitTest::GetInstance()->current_test_info()->name());
     fs::remove_all(dir_);
     fs::create_directories(dir_);
   }
@@ -58,8 +58,8 @@ io::TriMesh NoisyBallWithSpeck() {
 TEST_F(CleanTool, OneMeshToOneFileWithReportAndVelocity) {
   io::WriteMesh(dir_ / "ball.ply", NoisyBallWithSpeck());
   const ToolRun r = Clean((dir_ / "ball.ply").string() + " -o " + (dir_ / "clean.ply").string() + " --report " +
-                          (dir_ / "report.json").string() + " --json-summary " + (dir_ / "summary.json").string(),
-                      dir_);
+                              (dir_ / "report.json").string() + " --json-summary " + (dir_ / "summary.json").string(),
+                          dir_);
   ASSERT_EQ(r.code, 0) << r.err;
   const io::TriMesh out = io::ReadMesh(dir_ / "clean.ply");
   const clean::MeshStats s = clean::ComputeStats(out);
@@ -88,7 +88,7 @@ TEST_F(CleanTool, SequenceToFolderWithFramesAndFormat) {
   EXPECT_TRUE(fs::exists(dir_ / "out" / "ice_clean.0002.ply"));
   EXPECT_TRUE(fs::exists(dir_ / "out" / "ice_clean.0003.ply"));
   EXPECT_FALSE(fs::exists(dir_ / "out" / "ice_clean.0003.obj"));  // --format ply
-  EXPECT_TRUE(fs::exists(dir_ / "out" / "ice_clean.0003.json"));   // per-frame report
+  EXPECT_TRUE(fs::exists(dir_ / "out" / "ice_clean.0003.json"));  // per-frame report
   EXPECT_GT(io::ReadMesh(dir_ / "out" / "ice_clean.0003.ply").triangle_count(), 0u);
   // The rime-bake call: one frame into a folder gives OBJ, PLY and the report.
   r = Clean((dir_ / "in" / "ice.0001.obj").string() + " -o " + (dir_ / "bake").string(), dir_);
@@ -157,8 +157,8 @@ TEST_F(CleanTool, RefusesAboveTheMemoryBudgetBeforeWritingAnyFrame) {
     io::WriteMesh(dir_ / "surface" / (std::string("ice.0001.") + ext), NoisyBallWithSpeck());
     const ToolRun r = Clean((dir_ / "surface").string() + " -o " + (dir_ / "clean").string() + " -j 1 --memory-budget 1M", dir_);
     EXPECT_EQ(r.code, 10) << ext << ": " << r.err;
-    const std::string expected = " triangles (mesh " + (dir_ / "surface" / (std::string("ice.0001.") + ext)).string() +
-                                 "), budget 1 MiB (--memory-budget)";
+    const std::string expected =
+        " triangles (mesh " + (dir_ / "surface" / (std::string("ice.0001.") + ext)).string() + "), budget 1 MiB (--memory-budget)";
     EXPECT_NE(r.err.find("rime-clean: error: needs about "), std::string::npos) << r.err;
     EXPECT_NE(r.err.find(expected), std::string::npos) << r.err;
     EXPECT_FALSE(fs::exists(dir_ / "clean")) << ext;
@@ -178,9 +178,9 @@ TEST_F(CleanTool, SandboxRefusesASymlinkOutAndAnEscapingOutput) {
   const std::string box = (dir_ / "box").string();
   const ToolRun link = Clean(box + "/ice.0001.ply -o " + box + "/clean --sandbox " + box, dir_);
   EXPECT_EQ(link.code, 2) << link.err;
-  EXPECT_NE(link.err.find("input " + box + "/ice.0001.ply resolves to " + (dir_ / "outside" / "ice.0001.ply").string() +
-                          ", outside the sandbox"),
-            std::string::npos)
+  EXPECT_NE(
+      link.err.find("input " + box + "/ice.0001.ply resolves to " + (dir_ / "outside" / "ice.0001.ply").string() + ", outside the sandbox"),
+      std::string::npos)
       << link.err;
   fs::remove(dir_ / "box" / "ice.0001.ply");
   fs::copy_file(dir_ / "outside" / "ice.0001.ply", dir_ / "box" / "ice.0001.ply");

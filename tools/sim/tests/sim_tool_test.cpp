@@ -33,8 +33,8 @@ Result Exec(const std::string& command) {
 class SimTool : public ::testing::Test {
  protected:
   void SetUp() override {
-    dir_ = fs::temp_directory_path() / ("rime_sim_tool_" + std::to_string(getpid()) + "_" +
-                                        ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    dir_ = fs::temp_directory_path() /
+           ("rime_sim_tool_" + std::to_string(getpid()) + "_" + ::testing::UnitTest::GetInstance()->current_test_info()->name());
     fs::remove_all(dir_);
     fs::create_directories(dir_);
   }
@@ -42,12 +42,14 @@ class SimTool : public ::testing::Test {
 
   fs::path WriteScene(const std::string& simulation_extra, double end_time = 0.2, double fps = 30) {
     const fs::path scene = dir_ / "scene.toml";
-    std::ofstream(scene) << "[scene]\nfps = " << fps << "\nend_time = " << end_time << "\n"
-                         << "[water]\nspacing = 0.04\n"
-                         << "[sim]\nmodules = [\"gravity\", \"viscosity\", \"freezing\"]\n" << simulation_extra << "\n"
-                         << "[freezing]\nglaze_threshold = 0.01\nicicle_threshold = 0.002\n"
-                         << "[[solid]]\nname = \"tank\"\nshape = \"box\"\ncontainer = true\nsize = [0.6, 0.6, 0.4]\ntranslate = [0, 0, 0.2]\n"
-                         << "[[water_block]]\nmin = [-0.15, -0.15, 0.15]\nmax = [0.1, 0.1, 0.3]\nvelocity = [0.5, 0, -1]\n";
+    std::ofstream(scene)
+        << "[scene]\nfps = " << fps << "\nend_time = " << end_time << "\n"
+        << "[water]\nspacing = 0.04\n"
+        << "[sim]\nmodules = [\"gravity\", \"viscosity\", \"freezing\"]\n"
+        << simulation_extra << "\n"
+        << "[freezing]\nglaze_threshold = 0.01\nicicle_threshold = 0.002\n"
+        << "[[solid]]\nname = \"tank\"\nshape = \"box\"\ncontainer = true\nsize = [0.6, 0.6, 0.4]\ntranslate = [0, 0, 0.2]\n"
+        << "[[water_block]]\nmin = [-0.15, -0.15, 0.15]\nmax = [0.1, 0.1, 0.3]\nvelocity = [0.5, 0, -1]\n";
     return scene;
   }
   void MakeBoundary(const fs::path& scene) {
@@ -142,7 +144,8 @@ TEST_F(SimTool, CudaWithoutGpuIsRefused) {
 
 // ParaView 5.11's H5Part reader opens a frame on its own and the index as a timed sequence.
 TEST_F(SimTool, ParaViewOpensFramesAndTheSequence) {
-  if (Exec("command -v pvpython").code != 0) GTEST_SKIP() << "pvpython not installed (Debian packages paraview + python3-paraview): not checked";
+  if (Exec("command -v pvpython").code != 0)
+    GTEST_SKIP() << "pvpython not installed (Debian packages paraview + python3-paraview): not checked";
   const fs::path scene = WriteScene("", 0.1);
   MakeBoundary(scene);
   ASSERT_EQ(Exec(Sim(scene, "sim")).code, 0);

@@ -85,7 +85,8 @@ TEST_F(Cli, WritesEveryFormatForBothPhases) {
   ASSERT_EQ(run.code, 0) << run.output;
   for (const char* prefix : {"ice", "water"})
     for (int f : {1, 2})
-      for (const char* ext : {"vdb", "obj", "ply"}) EXPECT_TRUE(fs::exists(rime::io::FramePath(Out(), prefix, f, ext))) << prefix << f << ext;
+      for (const char* ext : {"vdb", "obj", "ply"})
+        EXPECT_TRUE(fs::exists(rime::io::FramePath(Out(), prefix, f, ext))) << prefix << f << ext;
   const rime::io::TriMesh ply = rime::io::ReadMesh(rime::io::FramePath(Out(), "water", 2, "ply"));
   ASSERT_FALSE(ply.empty());
   ASSERT_EQ(ply.velocities.size(), ply.positions.size());

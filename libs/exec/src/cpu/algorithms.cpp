@@ -114,10 +114,8 @@ T MaxOp(T a, T b) {
 
 void SortPairs(const Device& device, std::uint64_t* keys, std::uint32_t* values, Index n, int key_bits) {
   key_bits = std::clamp(key_bits, 1, 64);
-  if (device.is_cuda())
-    cuda_impl::SortPairs(keys, values, n, key_bits);
-  else
-    CpuSortPairs(keys, values, n, key_bits);
+  if (device.is_cuda()) cuda_impl::SortPairs(keys, values, n, key_bits);
+  else CpuSortPairs(keys, values, n, key_bits);
 }
 
 std::uint64_t ExclusiveScan(const Device& device, const std::uint32_t* in, std::uint32_t* out, Index n) {

@@ -15,8 +15,7 @@ namespace {
 
 void Check(cudaError_t error, const char* what) {
   if (error != cudaSuccess)
-    throw Error(ExitCode::kFailure, std::string("CUDA ") + what + " failed: " + cudaGetErrorName(error) + ": " +
-                                        cudaGetErrorString(error));
+    throw Error(ExitCode::kFailure, std::string("CUDA ") + what + " failed: " + cudaGetErrorName(error) + ": " + cudaGetErrorString(error));
 }
 
 // Temporary storage for CUB, grown on demand and kept for the process.
@@ -71,10 +70,8 @@ CudaStatus Query() {
                                   : "the NVIDIA driver is too old for this CUDA " + std::to_string(CUDART_VERSION / 1000) +
                                         " build (driver supports CUDA " + std::to_string(driver / 1000) + "." +
                                         std::to_string(driver % 1000 / 10) + ")";
-    else if (error == cudaErrorNoDevice)
-      status.reason = "the NVIDIA driver reports no CUDA device";
-    else
-      status.reason = std::string("the CUDA runtime failed to start: ") + cudaGetErrorName(error);
+    else if (error == cudaErrorNoDevice) status.reason = "the NVIDIA driver reports no CUDA device";
+    else status.reason = std::string("the CUDA runtime failed to start: ") + cudaGetErrorName(error);
     cudaGetLastError();
     return status;
   }
@@ -105,9 +102,15 @@ void* Malloc(std::size_t bytes) {
   return p;
 }
 void Free(void* pointer) { cudaFree(pointer); }
-void CopyHostToDevice(void* dst, const void* src, std::size_t bytes) { Check(cudaMemcpy(dst, src, bytes, cudaMemcpyHostToDevice), "copy to device"); }
-void CopyDeviceToHost(void* dst, const void* src, std::size_t bytes) { Check(cudaMemcpy(dst, src, bytes, cudaMemcpyDeviceToHost), "copy to host"); }
-void CopyDeviceToDevice(void* dst, const void* src, std::size_t bytes) { Check(cudaMemcpy(dst, src, bytes, cudaMemcpyDeviceToDevice), "device copy"); }
+void CopyHostToDevice(void* dst, const void* src, std::size_t bytes) {
+  Check(cudaMemcpy(dst, src, bytes, cudaMemcpyHostToDevice), "copy to device");
+}
+void CopyDeviceToHost(void* dst, const void* src, std::size_t bytes) {
+  Check(cudaMemcpy(dst, src, bytes, cudaMemcpyDeviceToHost), "copy to host");
+}
+void CopyDeviceToDevice(void* dst, const void* src, std::size_t bytes) {
+  Check(cudaMemcpy(dst, src, bytes, cudaMemcpyDeviceToDevice), "device copy");
+}
 void Memset0(void* pointer, std::size_t bytes) { Check(cudaMemset(pointer, 0, bytes), "memset"); }
 void Synchronize() { Check(cudaDeviceSynchronize(), "synchronize"); }
 

@@ -45,7 +45,7 @@ struct BoundaryObject {
   std::vector<float> volumes;  // V_b, m^3 (spec §3)
   double mean_spacing = 0;     // mean nearest-neighbour distance, m
   Vec3f bounds_min{0, 0, 0}, bounds_max{0, 0, 0};
-  double seconds = 0;          // wall time to build (load, sample, volumes)
+  double seconds = 0;  // wall time to build (load, sample, volumes)
   std::size_t size() const { return positions.size(); }
 };
 
@@ -53,8 +53,8 @@ struct BoundaryObject {
 /// d_b = object.spacing_ratio * d_p and computes V_b with h = smoothing_ratio * d_p.
 /// `mesh_path` is the resolved file for shape = "mesh" (ignored otherwise).
 /// Throws rime::Error(kBadInput) naming the file or object for every bad input.
-BoundaryObject BuildBoundaryObject(const io::SolidObject& object, std::uint32_t object_id,
-                                   const std::filesystem::path& mesh_path, const BoundarySettings& settings);
+BoundaryObject BuildBoundaryObject(const io::SolidObject& object, std::uint32_t object_id, const std::filesystem::path& mesh_path,
+                                   const BoundarySettings& settings);
 
 /// The H5Part frame of kind "boundary": x y z, normal_0..2, volume (float32), object_id (uint32),
 /// phase (uint8, 1 = boundary), id (int64, index within the file), and the metadata.

@@ -28,10 +28,10 @@
 namespace rime::boundary {
 
 struct SampleOptions {
-  double spacing = 0.01;                       // d_b, m
-  std::uint64_t max_particles = 50'000'000;    // refuse before sampling when more would be made
-  bool remove_near_duplicates = true;          // the final 0.5 d_b thinning pass (and Z-curve order)
-  std::string source = "mesh";                 // named in error messages (file path or object name)
+  double spacing = 0.01;                     // d_b, m
+  std::uint64_t max_particles = 50'000'000;  // refuse before sampling when more would be made
+  bool remove_near_duplicates = true;        // the final 0.5 d_b thinning pass (and Z-curve order)
+  std::string source = "mesh";               // named in error messages (file path or object name)
 };
 
 struct SampleStats {

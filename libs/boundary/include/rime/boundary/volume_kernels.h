@@ -67,5 +67,4 @@ struct BoundaryVolume {
 
 }  // namespace rime::boundary::kernels
 
-#define RIME_BOUNDARY_KERNELS(X)                                                                       \
-  X(rime::boundary::kernels::BoundaryVolume<float>) X(rime::boundary::kernels::BoundaryVolume<double>)
+#define RIME_BOUNDARY_KERNELS(X) X(rime::boundary::kernels::BoundaryVolume<float>) X(rime::boundary::kernels::BoundaryVolume<double>)

@@ -24,26 +24,26 @@
 namespace rime::clean {
 
 struct OperationRecord {
-  std::string name;   // "repair", "degenerate", "components", "holes", "remesh", "smooth", ...
+  std::string name;  // "repair", "degenerate", "components", "holes", "remesh", "smooth", ...
   double seconds = 0;
   double cpu_seconds = 0;  // CPU time of the whole process meanwhile (all threads): the fair cost on a shared machine
-  std::string detail; // what it did, in words ("removed 12 components (340 faces)")
+  std::string detail;      // what it did, in words ("removed 12 components (340 faces)")
 };
 
 struct CleanReport {
   MeshStats before, after;
-  std::string repair_path;            // "direct" (faces formed a manifold mesh) or "soup"
+  std::string repair_path;                // "direct" (faces formed a manifold mesh) or "soup"
   std::size_t faces_dropped_on_load = 0;  // faces that could not be added ("never" repair)
   std::size_t degenerate_faces_removed = 0;
   std::size_t components_removed = 0, component_faces_removed = 0;
   std::size_t holes_filled = 0, holes_left = 0;
-  double target_edge = 0;             // m, remeshing target (0 when remeshing is off)
+  double target_edge = 0;                     // m, remeshing target (0 when remeshing is off)
   std::int64_t self_intersecting_pairs = -1;  // -1: not checked
   bool self_intersections_removed = false;    // "remove" ran and none are left
-  bool velocities = false;            // output carries velocities
+  bool velocities = false;                    // output carries velocities
   std::vector<OperationRecord> operations;
   std::vector<std::string> warnings;
-  double seconds = 0;                 // whole chain
+  double seconds = 0;  // whole chain
 
   bool manifold() const { return after.manifold(); }
   bool closed() const { return after.closed(); }

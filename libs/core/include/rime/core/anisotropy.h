@@ -26,12 +26,12 @@ inline constexpr double kSigmaIsoLattice = 0.2994;
 
 template <class T>
 struct Params {
-  T k_s = T(0);       // 1/m²; 0 = automatic 1/σ_iso = 1/(0.2994 h²)
-  T k_r = T(4);       // largest allowed ratio s_1 / s_k
-  T k_n = T(0.5);     // isotropic stretch of particles with fewer than n_eps neighbours
-  int n_eps = 6;      // N_ε: minimum neighbour count for the PCA to be trusted
-  T s_min = T(0.125); // det(hG) <= 512: bounded kernel peak
-  T s_max = T(1);     // support never exceeds the 2h search radius
+  T k_s = T(0);                     // 1/m²; 0 = automatic 1/σ_iso = 1/(0.2994 h²)
+  T k_r = T(4);                     // largest allowed ratio s_1 / s_k
+  T k_n = T(0.5);                   // isotropic stretch of particles with fewer than n_eps neighbours
+  int n_eps = 6;                    // N_ε: minimum neighbour count for the PCA to be trusted
+  T s_min = T(0.125);               // det(hG) <= 512: bounded kernel peak
+  T s_max = T(1);                   // support never exceeds the 2h search radius
   bool center_on_particle = false;  // literal paper Eq. 28 (centred on x_i) instead of the weighted mean
 };
 
@@ -41,9 +41,9 @@ struct Params {
 template <class T>
 struct CovarianceAccumulator {
   T weight_sum = T(0);
-  Vec3<T> first{};      // Σ w r
-  T second[6] = {};     // Σ w r rᵀ: xx, yy, zz, xy, xz, yz
-  int neighbors = 0;    // n_j = |N(j)|, the particle itself excluded
+  Vec3<T> first{};    // Σ w r
+  T second[6] = {};   // Σ w r rᵀ: xx, yy, zz, xy, xz, yz
+  int neighbors = 0;  // n_j = |N(j)|, the particle itself excluded
 
   /// The particle's own contribution (offset 0, weight W(0)); not counted as a neighbour.
   RIME_HDI void AddSelf(T w) { weight_sum += w; }
@@ -60,9 +60,7 @@ struct CovarianceAccumulator {
     ++neighbors;
   }
   /// Weighted mean offset Σ w r / Σ w (add x_i for the weighted mean position x̄^w).
-  RIME_HDI Vec3<T> MeanOffset() const {
-    return weight_sum > T(0) ? first / weight_sum : Vec3<T>{};
-  }
+  RIME_HDI Vec3<T> MeanOffset() const { return weight_sum > T(0) ? first / weight_sum : Vec3<T>{}; }
   /// C = Σ w (x_k − c)(x_k − c)ᵀ / Σ w with c the weighted mean (default) or the particle.
   RIME_HDI Mat3<T> Covariance(bool center_on_particle = false) const {
     Mat3<T> c;
@@ -83,7 +81,7 @@ struct CovarianceAccumulator {
 template <class T>
 struct Anisotropy {
   Mat3<T> rotation = Mat3<T>::Identity();  // columns: principal directions, s_1 >= s_2 >= s_3 order
-  Vec3<T> stretch{T(1), T(1), T(1)};        // s_1, s_2, s_3 (dimensionless)
+  Vec3<T> stretch{T(1), T(1), T(1)};       // s_1, s_2, s_3 (dimensionless)
 
   /// D = R diag(1/s) Rᵀ: dimensionless, stored per ice particle at freezing time (spec §10).
   RIME_HDI Mat3<T> D() const {

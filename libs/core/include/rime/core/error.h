@@ -42,11 +42,7 @@ class Error : public std::runtime_error {
   std::string where_;
 };
 
-inline Error InputError(std::string what, std::string where = {}) {
-  return Error(ExitCode::kBadInput, std::move(what), std::move(where));
-}
-inline Error IoError(std::string what, std::string where = {}) {
-  return Error(ExitCode::kIo, std::move(what), std::move(where));
-}
+inline Error InputError(std::string what, std::string where = {}) { return Error(ExitCode::kBadInput, std::move(what), std::move(where)); }
+inline Error IoError(std::string what, std::string where = {}) { return Error(ExitCode::kIo, std::move(what), std::move(where)); }
 
 }  // namespace rime

@@ -12,7 +12,7 @@ namespace rime {
 
 template <class T>
 struct CubicSpline {
-  T h;          // smoothing length
+  T h;  // smoothing length
   T inv_h;
   T w_norm;     // sigma3 / h^3
   T grad_norm;  // sigma3 / h^4

@@ -17,16 +17,20 @@ void SetProgramName(std::string name);
 const std::string& ProgramName();
 void Write(Level level, std::string_view message);
 
-template <class... Args> void Debug(fmt::format_string<Args...> f, Args&&... a) {
+template <class... Args>
+void Debug(fmt::format_string<Args...> f, Args&&... a) {
   if (GetLevel() <= Level::kDebug) Write(Level::kDebug, fmt::format(f, std::forward<Args>(a)...));
 }
-template <class... Args> void Info(fmt::format_string<Args...> f, Args&&... a) {
+template <class... Args>
+void Info(fmt::format_string<Args...> f, Args&&... a) {
   if (GetLevel() <= Level::kInfo) Write(Level::kInfo, fmt::format(f, std::forward<Args>(a)...));
 }
-template <class... Args> void Warn(fmt::format_string<Args...> f, Args&&... a) {
+template <class... Args>
+void Warn(fmt::format_string<Args...> f, Args&&... a) {
   if (GetLevel() <= Level::kWarning) Write(Level::kWarning, fmt::format(f, std::forward<Args>(a)...));
 }
-template <class... Args> void Error(fmt::format_string<Args...> f, Args&&... a) {
+template <class... Args>
+void Error(fmt::format_string<Args...> f, Args&&... a) {
   if (GetLevel() <= Level::kError) Write(Level::kError, fmt::format(f, std::forward<Args>(a)...));
 }
 

@@ -21,32 +21,83 @@ struct Vec3 {
   RIME_HDI T& operator[](int i) { return i == 0 ? x : (i == 1 ? y : z); }
   RIME_HDI T operator[](int i) const { return i == 0 ? x : (i == 1 ? y : z); }
 
-  RIME_HDI Vec3& operator+=(const Vec3& o) { x += o.x; y += o.y; z += o.z; return *this; }
-  RIME_HDI Vec3& operator-=(const Vec3& o) { x -= o.x; y -= o.y; z -= o.z; return *this; }
-  RIME_HDI Vec3& operator*=(T s) { x *= s; y *= s; z *= s; return *this; }
-  RIME_HDI Vec3& operator/=(T s) { x /= s; y /= s; z /= s; return *this; }
+  RIME_HDI Vec3& operator+=(const Vec3& o) {
+    x += o.x;
+    y += o.y;
+    z += o.z;
+    return *this;
+  }
+  RIME_HDI Vec3& operator-=(const Vec3& o) {
+    x -= o.x;
+    y -= o.y;
+    z -= o.z;
+    return *this;
+  }
+  RIME_HDI Vec3& operator*=(T s) {
+    x *= s;
+    y *= s;
+    z *= s;
+    return *this;
+  }
+  RIME_HDI Vec3& operator/=(T s) {
+    x /= s;
+    y /= s;
+    z /= s;
+    return *this;
+  }
   RIME_HDI friend bool operator==(const Vec3& a, const Vec3& b) { return a.x == b.x && a.y == b.y && a.z == b.z; }
 };
 
-template <class T> RIME_HDI Vec3<T> operator+(Vec3<T> a, const Vec3<T>& b) { return a += b; }
-template <class T> RIME_HDI Vec3<T> operator-(Vec3<T> a, const Vec3<T>& b) { return a -= b; }
-template <class T> RIME_HDI Vec3<T> operator-(const Vec3<T>& a) { return {-a.x, -a.y, -a.z}; }
-template <class T> RIME_HDI Vec3<T> operator*(Vec3<T> a, T s) { return a *= s; }
-template <class T> RIME_HDI Vec3<T> operator*(T s, Vec3<T> a) { return a *= s; }
-template <class T> RIME_HDI Vec3<T> operator/(Vec3<T> a, T s) { return a /= s; }
-template <class T> RIME_HDI T Dot(const Vec3<T>& a, const Vec3<T>& b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
-template <class T> RIME_HDI Vec3<T> Cross(const Vec3<T>& a, const Vec3<T>& b) {
+template <class T>
+RIME_HDI Vec3<T> operator+(Vec3<T> a, const Vec3<T>& b) {
+  return a += b;
+}
+template <class T>
+RIME_HDI Vec3<T> operator-(Vec3<T> a, const Vec3<T>& b) {
+  return a -= b;
+}
+template <class T>
+RIME_HDI Vec3<T> operator-(const Vec3<T>& a) {
+  return {-a.x, -a.y, -a.z};
+}
+template <class T>
+RIME_HDI Vec3<T> operator*(Vec3<T> a, T s) {
+  return a *= s;
+}
+template <class T>
+RIME_HDI Vec3<T> operator*(T s, Vec3<T> a) {
+  return a *= s;
+}
+template <class T>
+RIME_HDI Vec3<T> operator/(Vec3<T> a, T s) {
+  return a /= s;
+}
+template <class T>
+RIME_HDI T Dot(const Vec3<T>& a, const Vec3<T>& b) {
+  return a.x * b.x + a.y * b.y + a.z * b.z;
+}
+template <class T>
+RIME_HDI Vec3<T> Cross(const Vec3<T>& a, const Vec3<T>& b) {
   return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
 }
-template <class T> RIME_HDI T SquaredNorm(const Vec3<T>& a) { return Dot(a, a); }
-template <class T> RIME_HDI T Norm(const Vec3<T>& a) { return std::sqrt(Dot(a, a)); }
-template <class T> RIME_HDI Vec3<T> Min(const Vec3<T>& a, const Vec3<T>& b) {
+template <class T>
+RIME_HDI T SquaredNorm(const Vec3<T>& a) {
+  return Dot(a, a);
+}
+template <class T>
+RIME_HDI T Norm(const Vec3<T>& a) {
+  return std::sqrt(Dot(a, a));
+}
+template <class T>
+RIME_HDI Vec3<T> Min(const Vec3<T>& a, const Vec3<T>& b) {
   return {a.x < b.x ? a.x : b.x, a.y < b.y ? a.y : b.y, a.z < b.z ? a.z : b.z};
 }
-template <class T> RIME_HDI Vec3<T> Max(const Vec3<T>& a, const Vec3<T>& b) {
+template <class T>
+RIME_HDI Vec3<T> Max(const Vec3<T>& a, const Vec3<T>& b) {
   return {a.x > b.x ? a.x : b.x, a.y > b.y ? a.y : b.y, a.z > b.z ? a.z : b.z};
 }
-template <class T> RIME_HDI bool IsFinite(const Vec3<T>& a) {
+template <class T>
+RIME_HDI bool IsFinite(const Vec3<T>& a) {
   return std::isfinite(a.x) && std::isfinite(a.y) && std::isfinite(a.z);
 }
 
@@ -91,33 +142,42 @@ struct Mat3 {
   }
 };
 
-template <class T> RIME_HDI Mat3<T> operator+(Mat3<T> a, const Mat3<T>& b) { return a += b; }
-template <class T> RIME_HDI Mat3<T> operator*(Mat3<T> a, T s) { return a *= s; }
-template <class T> RIME_HDI Vec3<T> operator*(const Mat3<T>& a, const Vec3<T>& v) {
-  return {a.m[0][0] * v.x + a.m[0][1] * v.y + a.m[0][2] * v.z,
-          a.m[1][0] * v.x + a.m[1][1] * v.y + a.m[1][2] * v.z,
+template <class T>
+RIME_HDI Mat3<T> operator+(Mat3<T> a, const Mat3<T>& b) {
+  return a += b;
+}
+template <class T>
+RIME_HDI Mat3<T> operator*(Mat3<T> a, T s) {
+  return a *= s;
+}
+template <class T>
+RIME_HDI Vec3<T> operator*(const Mat3<T>& a, const Vec3<T>& v) {
+  return {a.m[0][0] * v.x + a.m[0][1] * v.y + a.m[0][2] * v.z, a.m[1][0] * v.x + a.m[1][1] * v.y + a.m[1][2] * v.z,
           a.m[2][0] * v.x + a.m[2][1] * v.y + a.m[2][2] * v.z};
 }
-template <class T> RIME_HDI Mat3<T> operator*(const Mat3<T>& a, const Mat3<T>& b) {
+template <class T>
+RIME_HDI Mat3<T> operator*(const Mat3<T>& a, const Mat3<T>& b) {
   Mat3<T> r;
   for (int i = 0; i < 3; ++i)
     for (int j = 0; j < 3; ++j) r.m[i][j] = a.m[i][0] * b.m[0][j] + a.m[i][1] * b.m[1][j] + a.m[i][2] * b.m[2][j];
   return r;
 }
-template <class T> RIME_HDI Mat3<T> Transpose(const Mat3<T>& a) {
+template <class T>
+RIME_HDI Mat3<T> Transpose(const Mat3<T>& a) {
   Mat3<T> r;
   for (int i = 0; i < 3; ++i)
     for (int j = 0; j < 3; ++j) r.m[i][j] = a.m[j][i];
   return r;
 }
-template <class T> RIME_HDI T Determinant(const Mat3<T>& a) {
-  return a.m[0][0] * (a.m[1][1] * a.m[2][2] - a.m[1][2] * a.m[2][1]) -
-         a.m[0][1] * (a.m[1][0] * a.m[2][2] - a.m[1][2] * a.m[2][0]) +
+template <class T>
+RIME_HDI T Determinant(const Mat3<T>& a) {
+  return a.m[0][0] * (a.m[1][1] * a.m[2][2] - a.m[1][2] * a.m[2][1]) - a.m[0][1] * (a.m[1][0] * a.m[2][2] - a.m[1][2] * a.m[2][0]) +
          a.m[0][2] * (a.m[1][0] * a.m[2][1] - a.m[1][1] * a.m[2][0]);
 }
 
 /// Rotation by `angle` radians about `axis` (any length > 0), by Rodrigues' formula.
-template <class T> RIME_HDI Mat3<T> AxisAngleRotation(const Vec3<T>& axis, T angle) {
+template <class T>
+RIME_HDI Mat3<T> AxisAngleRotation(const Vec3<T>& axis, T angle) {
   const Vec3<T> a = axis / Norm(axis);
   const T c = std::cos(angle), s = std::sin(angle), t = T(1) - c;
   Mat3<T> r;
@@ -128,14 +188,16 @@ template <class T> RIME_HDI Mat3<T> AxisAngleRotation(const Vec3<T>& axis, T ang
 }
 
 /// Euler angles in degrees applied about X first, then Y, then Z (the scene file's `rotate`).
-template <class T> RIME_HDI Mat3<T> RotationXYZDegrees(const Vec3<T>& degrees) {
+template <class T>
+RIME_HDI Mat3<T> RotationXYZDegrees(const Vec3<T>& degrees) {
   const T k = T(3.14159265358979323846) / T(180);
   return AxisAngleRotation(Vec3<T>(0, 0, 1), degrees.z * k) * AxisAngleRotation(Vec3<T>(0, 1, 0), degrees.y * k) *
          AxisAngleRotation(Vec3<T>(1, 0, 0), degrees.x * k);
 }
 
 /// Solves A x = b for a symmetric positive definite 3x3 A by Cholesky (no pivoting needed).
-template <class T> RIME_HDI Vec3<T> SolveSpd(const Mat3<T>& a, const Vec3<T>& b) {
+template <class T>
+RIME_HDI Vec3<T> SolveSpd(const Mat3<T>& a, const Vec3<T>& b) {
   const T l00 = std::sqrt(a.m[0][0]);
   const T l10 = a.m[1][0] / l00, l20 = a.m[2][0] / l00;
   const T l11 = std::sqrt(a.m[1][1] - l10 * l10);
@@ -149,7 +211,8 @@ template <class T> RIME_HDI Vec3<T> SolveSpd(const Mat3<T>& a, const Vec3<T>& b)
 /// Symmetric 3x3 eigen decomposition by cyclic Jacobi rotations: robust for degenerate
 /// (collinear, coplanar, repeated) inputs and usable in device code. On return
 /// a = V diag(values) V^T with values sorted descending and V's columns the eigenvectors.
-template <class T> RIME_HDI void SymmetricEigen(Mat3<T> a, Vec3<T>& values, Mat3<T>& vectors) {
+template <class T>
+RIME_HDI void SymmetricEigen(Mat3<T> a, Vec3<T>& values, Mat3<T>& vectors) {
   Mat3<T> v = Mat3<T>::Identity();
   // Converged when the off-diagonal is at rounding level (ε², ε the precision's epsilon): float
   // never reaches a fixed 1e-30 and ran all 16 sweeps.

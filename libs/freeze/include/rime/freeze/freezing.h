@@ -46,7 +46,7 @@ struct FreezingBoundary : exec::AttributeGroup<FreezingBoundary<T>> {
   DeviceArray<std::uint8_t> growth_valid;
   DeviceArray<std::uint8_t> ice_kind;  // freeze::IceKind; 0 for solids
   DeviceArray<double> ice_time;        // creation time, s
-  DeviceArray<Sym6<T>> ice_d;  // anisotropy D frozen with the particle
+  DeviceArray<Sym6<T>> ice_d;          // anisotropy D frozen with the particle
 
   template <class Self, class F>
   static void Visit(Self& s, F& f) {
@@ -82,10 +82,38 @@ template <class T>
 struct FreezingWork : exec::AttributeGroup<FreezingWork<T>> {
   static constexpr const char* kModule = "freezing";
   explicit FreezingWork(const exec::Device& d)
-      : fluid_d(d), fluid_flag(d), boundary_active(d), active_list(d), decision(d), trigger(d), frozen(d), wet(d), region(d),
-        region_list(d), energy_solid(d), energy_ice(d), laplacian(d), lambda(d), active_x(d), bf(d), wet_seen(d), newly_wet(d), dried(d),
-        stale(d), evaluate(d), film_touched(d), structure_touched(d), change_list(d), region_lambda(d), row_begin(d), row_length(d),
-        row_pool(d), row_flags(d), row_list(d), row_x(d), new_rows(d) {}
+      : fluid_d(d),
+        fluid_flag(d),
+        boundary_active(d),
+        active_list(d),
+        decision(d),
+        trigger(d),
+        frozen(d),
+        wet(d),
+        region(d),
+        region_list(d),
+        energy_solid(d),
+        energy_ice(d),
+        laplacian(d),
+        lambda(d),
+        active_x(d),
+        bf(d),
+        wet_seen(d),
+        newly_wet(d),
+        dried(d),
+        stale(d),
+        evaluate(d),
+        film_touched(d),
+        structure_touched(d),
+        change_list(d),
+        region_lambda(d),
+        row_begin(d),
+        row_length(d),
+        row_pool(d),
+        row_flags(d),
+        row_list(d),
+        row_x(d),
+        new_rows(d) {}
   DeviceArray<Sym6<T>> fluid_d;  // water: anisotropy D of this step
   DeviceArray<std::uint32_t> fluid_flag, boundary_active, active_list, decision, trigger, frozen, wet, region, region_list;
   DeviceArray<T> energy_solid, energy_ice, laplacian, lambda;  // laplacian, lambda: per boundary particle
@@ -175,11 +203,11 @@ Index FreezeStep(const exec::Device& device, const io::Scene& scene, const Parti
                  FreezingBoundary<T>& film, FreezingFluid<T>* clocks, FreezingWork<T>& work, DeviceArray<std::uint32_t>& keep,
                  DeviceArray<std::uint32_t>& slot, DeviceArray<std::uint32_t>& frozen_list);
 
-extern template Index FreezeStep<float>(const exec::Device&, const io::Scene&, const Particles<float>&, double, double&, FreezingBoundary<float>&,
-                                        FreezingFluid<float>*, FreezingWork<float>&, DeviceArray<std::uint32_t>&, DeviceArray<std::uint32_t>&,
-                                        DeviceArray<std::uint32_t>&);
+extern template Index FreezeStep<float>(const exec::Device&, const io::Scene&, const Particles<float>&, double, double&,
+                                        FreezingBoundary<float>&, FreezingFluid<float>*, FreezingWork<float>&, DeviceArray<std::uint32_t>&,
+                                        DeviceArray<std::uint32_t>&, DeviceArray<std::uint32_t>&);
 extern template Index FreezeStep<double>(const exec::Device&, const io::Scene&, const Particles<double>&, double, double&,
-                                         FreezingBoundary<double>&, FreezingFluid<double>*, FreezingWork<double>&, DeviceArray<std::uint32_t>&,
-                                         DeviceArray<std::uint32_t>&, DeviceArray<std::uint32_t>&);
+                                         FreezingBoundary<double>&, FreezingFluid<double>*, FreezingWork<double>&,
+                                         DeviceArray<std::uint32_t>&, DeviceArray<std::uint32_t>&, DeviceArray<std::uint32_t>&);
 
 }  // namespace rime::freeze

@@ -30,18 +30,18 @@ enum IceKind : std::uint8_t { kNotIce = 0, kGlaze = 1, kIcicle = 2 };
 /// Parameters of the freezing kernels, in the solver's precision.
 template <class T>
 struct FreezeParams {
-  T h, mass, film_max;         // Γ_max (kg)
+  T h, mass, film_max;  // Γ_max (kg)
   T alpha_solid, alpha_ice;
   T dt_ref;
   T glaze_threshold, icicle_threshold;
-  T growth_sign;               // +1 paper, −1 flipped
-  T gravity_growth;            // weight of gravity's direction added to the flow's (0: Eq. 26 alone)
-  T tip_growth = T(1);         // power of fr on ice (1: Eq. 31 alone)
-  Vec3<T> gravity_dir;         // unit vector along gravity (zero without gravity)
-  bool fr_clamp;               // fr_mode = "clamp"
-  bool ce_raw;                 // ce_mode = "raw" (kg/m³) instead of dimensionless
-  bool ce_sum;                 // ce_aggregation = "sum"
-  bool isotropic;              // growth = "isotropic" (baseline: G = I/h)
+  T growth_sign;        // +1 paper, −1 flipped
+  T gravity_growth;     // weight of gravity's direction added to the flow's (0: Eq. 26 alone)
+  T tip_growth = T(1);  // power of fr on ice (1: Eq. 31 alone)
+  Vec3<T> gravity_dir;  // unit vector along gravity (zero without gravity)
+  bool fr_clamp;        // fr_mode = "clamp"
+  bool ce_raw;          // ce_mode = "raw" (kg/m³) instead of dimensionless
+  bool ce_sum;          // ce_aggregation = "sum"
+  bool isotropic;       // growth = "isotropic" (baseline: G = I/h)
   anisotropy::Params<T> pca;
 };
 
@@ -337,7 +337,7 @@ template <class T>
 struct ApplyFilmDiffusion {
   const std::uint32_t* list;
   const T* laplacian;  // per boundary particle
-  T step;  // Δt_sub · D_Γ
+  T step;              // Δt_sub · D_Γ
   T* film;
   std::uint32_t* film_touched;
   RIME_HD void operator()(Index k) const {
@@ -472,15 +472,16 @@ struct KeepUnfrozen {
 }  // namespace kernels
 }  // namespace rime::freeze
 
-#define RIME_FREEZE_KERNELS_T(X, T)                                                                                     \
-  X(rime::freeze::kernels::MarkContacts<T>) X(rime::freeze::kernels::FluidAnisotropy<T>)                               \
-  X(rime::freeze::kernels::FilmAndGrowth<T>) X(rime::freeze::kernels::MarkWet<T>) X(rime::freeze::kernels::DilateWet<T>) \
-  X(rime::freeze::kernels::FilmLaplacian<T>) X(rime::freeze::kernels::ApplyFilmDiffusion<T>)                           \
-  X(rime::freeze::kernels::DryFilm<T>) X(rime::freeze::kernels::PhaseDecision<T>)                                     \
-  X(rime::freeze::kernels::NucleationDelay<T>) X(rime::freeze::kernels::GrowRegion<T>) X(rime::freeze::kernels::JoinRegion<T>) \
-  X(rime::freeze::kernels::MarkAffected<T>) X(rime::freeze::kernels::GatherListed<T>)
+#define RIME_FREEZE_KERNELS_T(X, T)                                                                                                     \
+  X(rime::freeze::kernels::MarkContacts<T>)                                                                                             \
+  X(rime::freeze::kernels::FluidAnisotropy<T>) X(rime::freeze::kernels::FilmAndGrowth<T>) X(rime::freeze::kernels::MarkWet<T>)          \
+      X(rime::freeze::kernels::DilateWet<T>) X(rime::freeze::kernels::FilmLaplacian<T>) X(rime::freeze::kernels::ApplyFilmDiffusion<T>) \
+          X(rime::freeze::kernels::DryFilm<T>) X(rime::freeze::kernels::PhaseDecision<T>) X(rime::freeze::kernels::NucleationDelay<T>)  \
+              X(rime::freeze::kernels::GrowRegion<T>) X(rime::freeze::kernels::JoinRegion<T>) X(rime::freeze::kernels::MarkAffected<T>) \
+                  X(rime::freeze::kernels::GatherListed<T>)
 
-#define RIME_FREEZE_KERNELS(X)                                                                                   \
-  RIME_FREEZE_KERNELS_T(X, float) RIME_FREEZE_KERNELS_T(X, double) X(rime::freeze::kernels::MarkFluidFromBoundary) \
-  X(rime::freeze::kernels::KeepUnfrozen) X(rime::freeze::kernels::WetChanges) X(rime::freeze::kernels::AddStale)    \
-  X(rime::freeze::kernels::SetListed) X(rime::freeze::kernels::MarkRowless) X(rime::freeze::kernels::StoreRows)
+#define RIME_FREEZE_KERNELS(X)                                                                                            \
+  RIME_FREEZE_KERNELS_T(X, float)                                                                                         \
+  RIME_FREEZE_KERNELS_T(X, double) X(rime::freeze::kernels::MarkFluidFromBoundary) X(rime::freeze::kernels::KeepUnfrozen) \
+      X(rime::freeze::kernels::WetChanges) X(rime::freeze::kernels::AddStale) X(rime::freeze::kernels::SetListed)         \
+          X(rime::freeze::kernels::MarkRowless) X(rime::freeze::kernels::StoreRows)

@@ -13,9 +13,9 @@
 namespace rime::io {
 
 struct TriMesh {
-  std::vector<Vec3f> positions;                    // m
-  std::vector<Vec3f> normals;                      // per vertex, unit; empty = none
-  std::vector<Vec3f> velocities;                   // per vertex, m/s; empty = none
+  std::vector<Vec3f> positions;                         // m
+  std::vector<Vec3f> normals;                           // per vertex, unit; empty = none
+  std::vector<Vec3f> velocities;                        // per vertex, m/s; empty = none
   std::vector<std::array<std::uint32_t, 3>> triangles;  // counter-clockwise seen from outside
 
   std::size_t vertex_count() const { return positions.size(); }

@@ -37,15 +37,15 @@
 namespace rime::io {
 
 struct Param {
-  std::string_view name;          // TOML key
-  std::string_view unit = {};     // SI unit or what the value counts ("d_p", "voxels"); empty: a plain number
-  Range range = Range::Any();     // numbers, integers and every component of a vector
-  std::string_view help = {};     // one line: the flag's help and the start of the docs' meaning column
-  std::string_view doc = {};      // docs only, appended to `help` (markdown)
-  std::string_view flag = {};     // command-line override in CLI11 syntax ("--kr", "!--no-velocity"); empty: none
-  std::string_view default_doc = {};  // docs: the default in words when the value alone does not say it
+  std::string_view name;                           // TOML key
+  std::string_view unit = {};                      // SI unit or what the value counts ("d_p", "voxels"); empty: a plain number
+  Range range = Range::Any();                      // numbers, integers and every component of a vector
+  std::string_view help = {};                      // one line: the flag's help and the start of the docs' meaning column
+  std::string_view doc = {};                       // docs only, appended to `help` (markdown)
+  std::string_view flag = {};                      // command-line override in CLI11 syntax ("--kr", "!--no-velocity"); empty: none
+  std::string_view default_doc = {};               // docs: the default in words when the value alone does not say it
   std::span<const std::string_view> choices = {};  // allowed names of a string list
-  bool scalar_or_vector = false;  // a vector also accepts one number for all three components
+  bool scalar_or_vector = false;                   // a vector also accepts one number for all three components
 };
 
 template <class E>

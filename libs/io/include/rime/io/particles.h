@@ -26,21 +26,21 @@ inline constexpr int kParticleFormatVersion = 1;
 /// Values of the `phase` dataset.
 enum class Phase : std::uint8_t { kFluid = 0, kBoundary = 1, kIce = 2 };
 
-using AttributeData = std::variant<std::vector<float>, std::vector<double>, std::vector<std::int32_t>,
-                                   std::vector<std::uint32_t>, std::vector<std::int64_t>, std::vector<std::uint8_t>>;
+using AttributeData = std::variant<std::vector<float>, std::vector<double>, std::vector<std::int32_t>, std::vector<std::uint32_t>,
+                                   std::vector<std::int64_t>, std::vector<std::uint8_t>>;
 
 struct ParticleFrame {
   std::string kind = "particles";  // "particles" (simulation frames) or "boundary"
   double time = 0;                 // s
   std::int64_t frame = 0;
-  double spacing = 0;              // fluid particle spacing d_p, m
-  double particle_radius = 0;      // d_p / 2, m
-  double rest_density = 1000;      // kg/m^3
+  double spacing = 0;          // fluid particle spacing d_p, m
+  double particle_radius = 0;  // d_p / 2, m
+  double rest_density = 1000;  // kg/m^3
   std::string scene_hash;
-  std::map<std::string, double> numbers;      // extra numeric root attributes
-  std::map<std::string, std::string> texts;   // extra string root attributes
+  std::map<std::string, double> numbers;            // extra numeric root attributes
+  std::map<std::string, std::string> texts;         // extra string root attributes
   std::map<std::string, AttributeData> attributes;  // datasets of Step#0, all of length size()
-  std::string source;  // file it was read from (for error messages); empty when built in memory
+  std::string source;                               // file it was read from (for error messages); empty when built in memory
 
   std::size_t size() const;
   bool Has(const std::string& name) const { return attributes.count(name) != 0; }
@@ -90,7 +90,7 @@ struct IndexEntry {
 void WriteSequenceIndex(const std::filesystem::path& index_path, const std::vector<IndexEntry>& entries);
 
 /// "<folder>/<stem>.<frame padded to 4>.<extension>", e.g. particles.0012.h5part.
-std::filesystem::path FramePath(const std::filesystem::path& folder, std::string_view stem, std::int64_t frame,
-                                std::string_view extension, int padding = 4);
+std::filesystem::path FramePath(const std::filesystem::path& folder, std::string_view stem, std::int64_t frame, std::string_view extension,
+                                int padding = 4);
 
 }  // namespace rime::io

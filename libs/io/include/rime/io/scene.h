@@ -41,17 +41,29 @@ struct SceneInfo {
   template <class Self, class F>
   static void Visit(Self& s, F&& f) {
     f(Param{.name = "name", .help = "scene name (output folder of `rime-bake`)", .default_doc = "file name"}, s.name);
-    f(Param{.name = "fps", .unit = "1/s", .range = Range::OpenClosed(0, 10000),
-            .help = "output frames per second; frame k is at t = k/fps exactly"}, s.fps);
-    f(Param{.name = "end_time", .unit = "s", .range = Range::Positive(), .help = "simulated time",
-            .doc = "(end_time × fps at most 1,000,000 frames)", .flag = "--end-time"}, s.end_time);
-    f(Param{.name = "quality", .help = "accuracy preset, applied before explicit values (which win):",
+    f(Param{.name = "fps",
+            .unit = "1/s",
+            .range = Range::OpenClosed(0, 10000),
+            .help = "output frames per second; frame k is at t = k/fps exactly"},
+      s.fps);
+    f(Param{.name = "end_time",
+            .unit = "s",
+            .range = Range::Positive(),
+            .help = "simulated time",
+            .doc = "(end_time × fps at most 1,000,000 frames)",
+            .flag = "--end-time"},
+      s.end_time);
+    f(Param{.name = "quality",
+            .help = "accuracy preset, applied before explicit values (which win):",
             .doc = "preview = η 1 %, CFL 0.6, dt_max 10 ms, 2–50 iterations; production = the defaults; reference = η 0.01 %, "
                    "CFL 0.2, dt_max 2 ms, ≤ 500 iterations, double precision. Chosen from the speed/accuracy study "
-                   "([performance.md](performance.md#speed-and-accuracy))"}, s.quality);
-    f(Param{.name = "method", .help = "`im2013` stands for the method the paper improves on (Im et al. 2013):",
+                   "([performance.md](performance.md#speed-and-accuracy))"},
+      s.quality);
+    f(Param{.name = "method",
+            .help = "`im2013` stands for the method the paper improves on (Im et al. 2013):",
             .doc = "isotropic ice growth, Akinci 2013 surface tension instead of He 2014, no wall stickiness "
-                   "(`viscosity.wall_beta0 = 0`). A preset like `quality`: explicit values win"}, s.method);
+                   "(`viscosity.wall_beta0 = 0`). A preset like `quality`: explicit values win"},
+      s.method);
   }
 };
 
@@ -71,11 +83,19 @@ struct FluidSettings {
 
   template <class Self, class F>
   static void Visit(Self& s, F&& f) {
-    f(Param{.name = "spacing", .unit = "m", .range = Range::OpenClosed(0, 10),
-            .help = "particle spacing d_p; mass m = ρ0 d_p³", .flag = "--spacing"}, s.spacing);
+    f(Param{.name = "spacing",
+            .unit = "m",
+            .range = Range::OpenClosed(0, 10),
+            .help = "particle spacing d_p; mass m = ρ0 d_p³",
+            .flag = "--spacing"},
+      s.spacing);
     f(Param{.name = "rest_density", .unit = "kg/m³", .range = Range::Positive(), .help = "ρ0"}, s.rest_density);
-    f(Param{.name = "smoothing_ratio", .unit = "d_p", .range = Range::Closed(0.8, 2.0), .help = "h / d_p (support 2h)",
-            .flag = "--smoothing-ratio"}, s.smoothing_ratio);
+    f(Param{.name = "smoothing_ratio",
+            .unit = "d_p",
+            .range = Range::Closed(0.8, 2.0),
+            .help = "h / d_p (support 2h)",
+            .flag = "--smoothing-ratio"},
+      s.smoothing_ratio);
     f(Param{.name = "precision", .help = "arithmetic of the solver (double for reference runs)"}, s.precision);
   }
 };
@@ -95,9 +115,9 @@ inline std::span<const std::string_view> Names(AiiBoundary) {
 struct SolverSettings {
   TimeStep time_step = TimeStep::kCfl;
   double dt = 0.001;
-  double cfl = 0.4;     // lambda_CFL (spec §7)
+  double cfl = 0.4;  // lambda_CFL (spec §7)
   double dt_min = 1e-5, dt_max = 0.006;
-  double omega = 0.5;   // relaxed Jacobi weight (spec §6)
+  double omega = 0.5;  // relaxed Jacobi weight (spec §6)
   bool omega_fallback = true;
   double eta = 0.001;
   // At least 3, not Ihmsen's 2: after 2 the solve lets settled water breathe (the whole body in
@@ -111,27 +131,42 @@ struct SolverSettings {
 
   template <class Self, class F>
   static void Visit(Self& s, F&& f) {
-    f(Param{.name = "time_step", .help = "Δt rule ([physics](physics.md#time-step)).",
+    f(Param{.name = "time_step",
+            .help = "Δt rule ([physics](physics.md#time-step)).",
             .doc = "Either way the steps up to each output frame are made equal (the frame's time span divided by the "
                    "fewest steps no longer than the rule's Δt), so Δt does not jump at frame times: a shortened last step "
-                   "kicked water at rest at every frame"}, s.time_step);
-    f(Param{.name = "dt", .unit = "s", .range = Range::OpenClosed(0, 1), .help = "fixed Δt",
-            .doc = "(an upper bound: 2 ms at 24 fps steps 1.984 ms)"}, s.dt);
-    f(Param{.name = "cfl", .range = Range::OpenClosed(0, 0.7), .help = "λ in Δt = λ d_p / max(‖v‖, √(2 g H)),",
+                   "kicked water at rest at every frame"},
+      s.time_step);
+    f(Param{.name = "dt",
+            .unit = "s",
+            .range = Range::OpenClosed(0, 1),
+            .help = "fixed Δt",
+            .doc = "(an upper bound: 2 ms at 24 fps steps 1.984 ms)"},
+      s.dt);
+    f(Param{.name = "cfl",
+            .range = Range::OpenClosed(0, 0.7),
+            .help = "λ in Δt = λ d_p / max(‖v‖, √(2 g H)),",
             .doc = "H the water's extent along gravity (the speed its own weight can give it: deep water at rest would "
                    "otherwise step at `dt_max` and diverge, e.g. a 0.5 m column at d_p = 12.5 mm at 6 ms), also capped by "
                    "the explicit limits of viscosity, surface tension and air pressure (a scene whose limit falls below `dt_min` is "
                    "refused, naming the parameter). Above 0.7 particles tunnel through single-layer walls; a step that "
-                   "moves a particle more than 0.8 spacings stops the run as diverged"}, s.cfl);
+                   "moves a particle more than 0.8 spacings stops the run as diverged"},
+      s.cfl);
     f(Param{.name = "dt_min", .unit = "s", .range = Range::OpenClosed(0, 1), .help = "lower clamp of the CFL step"}, s.dt_min);
-    f(Param{.name = "dt_max", .unit = "s", .range = Range::OpenClosed(0, 1), .help = "upper clamp of the CFL step",
-            .doc = "(at least `dt_min`)"}, s.dt_max);
-    f(Param{.name = "omega", .range = Range::OpenClosed(0, 1),
-            .help = "relaxed-Jacobi weight (the paper's 0.8 diverges with Jacobi)"}, s.omega);
-    f(Param{.name = "omega_fallback",
-            .help = "restart a step's solve with ω = 0.5 when the error grows 3 iterations in a row"}, s.omega_fallback);
+    f(Param{.name = "dt_max",
+            .unit = "s",
+            .range = Range::OpenClosed(0, 1),
+            .help = "upper clamp of the CFL step",
+            .doc = "(at least `dt_min`)"},
+      s.dt_max);
+    f(Param{.name = "omega", .range = Range::OpenClosed(0, 1), .help = "relaxed-Jacobi weight (the paper's 0.8 diverges with Jacobi)"},
+      s.omega);
+    f(Param{.name = "omega_fallback", .help = "restart a step's solve with ω = 0.5 when the error grows 3 iterations in a row"},
+      s.omega_fallback);
     f(Param{.name = "eta", .range = Range::OpenClosed(0, 1), .help = "target average density error (0.1 %)"}, s.eta);
-    f(Param{.name = "min_iterations", .range = Range::Closed(1, 10000), .help = "fewest pressure iterations per step.",
+    f(Param{.name = "min_iterations",
+            .range = Range::Closed(1, 10000),
+            .help = "fewest pressure iterations per step.",
             .doc = "3, not Ihmsen's 2: after only 2 the solve lets settled water breathe, the whole body in phase, at a "
                    "few mm/s (an 8³ block at d_p = 2 cm: 2.6 mm/s, against 0.3–0.7 mm/s with 3), because a body that "
                    "sinks as a whole compresses only its bottom layer, which the average error hardly sees. The third "
@@ -139,20 +174,24 @@ struct SolverSettings {
                    "(`rime-bench-sim`); the preview preset keeps 2. Water starting on the lattice of a `water_block` "
                    "needs about 25–30 s to settle that far (the 8³ block): a regular lattice is no equilibrium of SPH"},
       s.min_iterations);
-    f(Param{.name = "max_iterations", .range = Range::Closed(1, 10000),
-            .help = "most pressure iterations per step (at least `min_iterations`)"}, s.max_iterations);
+    f(Param{.name = "max_iterations",
+            .range = Range::Closed(1, 10000),
+            .help = "most pressure iterations per step (at least `min_iterations`)"},
+      s.max_iterations);
     f(Param{.name = "warm_start", .range = Range::Closed(0, 1), .help = "p⁰ = warm_start · p_previous"}, s.warm_start);
-    f(Param{.name = "aii_boundary",
-            .help = "boundary term of a_ii ([physics](physics.md#pressure-iisph-eqs-124-ihmsen-et-al-2014))"}, s.aii_boundary);
-    f(Param{.name = "divergence_density_error", .range = Range::OpenClosed(0, 10),
-            .help = "stop when the average density error exceeds this (5 %)"}, s.divergence_density_error);
+    f(Param{.name = "aii_boundary", .help = "boundary term of a_ii ([physics](physics.md#pressure-iisph-eqs-124-ihmsen-et-al-2014))"},
+      s.aii_boundary);
+    f(Param{.name = "divergence_density_error",
+            .range = Range::OpenClosed(0, 10),
+            .help = "stop when the average density error exceeds this (5 %)"},
+      s.divergence_density_error);
     f(Param{.name = "gravity", .unit = "m/s²", .help = "(Rime is z-up)"}, s.gravity);
   }
 };
 
 struct ViscositySettings {
-  double mu = 1e-3;         // spec §5.1
-  double beta0 = 0.1;       // spec §5.2
+  double mu = 1e-3;    // spec §5.1
+  double beta0 = 0.1;  // spec §5.2
   double beta1 = 10;
   double wall_beta0 = 1.0;  // spec §5.4
   double epsilon = 0.01;
@@ -162,12 +201,14 @@ struct ViscositySettings {
   static void Visit(Self& s, F&& f) {
     f(Param{.name = "mu", .unit = "Pa·s", .range = Range::NonNegative(), .help = "Morris dynamic viscosity"}, s.mu);
     f(Param{.name = "beta0", .range = Range::NonNegative(), .help = "Monaghan α of the sticky fluid–fluid term"}, s.beta0);
-    f(Param{.name = "beta1", .unit = "m/s", .range = Range::NonNegative(), .help = "Monaghan c_s of the sticky fluid–fluid term"},
-      s.beta1);
-    f(Param{.name = "wall_beta0", .range = Range::NonNegative(), .help = "β0b of the fluid–solid stickiness,",
+    f(Param{.name = "beta1", .unit = "m/s", .range = Range::NonNegative(), .help = "Monaghan c_s of the sticky fluid–fluid term"}, s.beta1);
+    f(Param{.name = "wall_beta0",
+            .range = Range::NonNegative(),
+            .help = "β0b of the fluid–solid stickiness,",
             .doc = "integrated implicitly on the velocity the particle will have after the pressure solve (the previous "
                    "step's pressure acceleration as a predictor): applied to v + Δt g alone, the literal reading, it held "
-                   "water at rest up along the walls and kept a block circulating"}, s.wall_beta0);
+                   "water at rest up along the walls and kept a block circulating"},
+      s.wall_beta0);
     f(Param{.name = "epsilon", .range = Range::OpenClosed(0, 1), .help = "regulariser of the Monaghan term"}, s.epsilon);
     f(Param{.name = "limiter", .help = "apply the Monaghan term only to approaching pairs"}, s.limiter);
   }
@@ -188,15 +229,24 @@ struct SurfaceTensionSettings {
 
   template <class Self, class F>
   static void Visit(Self& s, F&& f) {
-    f(Param{.name = "model", .help = "He 2014 colour-field energy, or Akinci et al. 2013 (cohesion + curvature + adhesion)"},
-      s.model);
+    f(Param{.name = "model", .help = "He 2014 colour-field energy, or Akinci et al. 2013 (cohesion + curvature + adhesion)"}, s.model);
     f(Param{.name = "kappa", .unit = "N", .range = Range::NonNegative(), .help = "He 2014 κ"}, s.kappa);
-    f(Param{.name = "kappa_boundary", .unit = "N", .range = Range::NonNegative(), .help = "He 2014 adhesion to solids and ice",
-            .default_doc = "`kappa`"}, s.kappa_boundary);
-    f(Param{.name = "gamma", .range = Range::NonNegative(), .help = "Akinci 2013 cohesion and curvature coefficient",
-            .doc = "(model akinci2013 only)"}, s.gamma);
-    f(Param{.name = "beta", .range = Range::NonNegative(), .help = "Akinci 2013 adhesion to solids and ice",
-            .doc = "(model akinci2013 only)"}, s.beta);
+    f(Param{.name = "kappa_boundary",
+            .unit = "N",
+            .range = Range::NonNegative(),
+            .help = "He 2014 adhesion to solids and ice",
+            .default_doc = "`kappa`"},
+      s.kappa_boundary);
+    f(Param{.name = "gamma",
+            .range = Range::NonNegative(),
+            .help = "Akinci 2013 cohesion and curvature coefficient",
+            .doc = "(model akinci2013 only)"},
+      s.gamma);
+    f(Param{.name = "beta",
+            .range = Range::NonNegative(),
+            .help = "Akinci 2013 adhesion to solids and ice",
+            .doc = "(model akinci2013 only)"},
+      s.beta);
   }
 };
 
@@ -274,39 +324,50 @@ struct FreezingSettings {
     f(Param{.name = "film_max_ratio", .range = Range::Positive(), .help = "Γ_max / m"}, s.film_max_ratio);
     f(Param{.name = "alpha_solid", .range = Range::Closed(0, 1), .help = "film transfer fraction α onto solids"}, s.alpha_solid);
     f(Param{.name = "alpha_ice", .range = Range::Closed(0, 1), .help = "film transfer fraction α onto ice"}, s.alpha_ice);
-    f(Param{.name = "dt_ref", .unit = "s", .range = Range::Positive(), .help = "the step the paper's per-step rates refer to"},
-      s.dt_ref);
-    f(Param{.name = "film_diffusion", .unit = "d_p²/dt_ref", .range = Range::NonNegative(), .help = "D_Γ (0 disables)"},
-      s.film_diffusion);
+    f(Param{.name = "dt_ref", .unit = "s", .range = Range::Positive(), .help = "the step the paper's per-step rates refer to"}, s.dt_ref);
+    f(Param{.name = "film_diffusion", .unit = "d_p²/dt_ref", .range = Range::NonNegative(), .help = "D_Γ (0 disables)"}, s.film_diffusion);
     f(Param{.name = "drying_rate", .unit = "1/s", .range = Range::NonNegative(), .help = "k_dry"}, s.drying_rate);
-    f(Param{.name = "freeze_delay", .unit = "s", .range = Range::Closed(0, 60),
+    f(Param{.name = "freeze_delay",
+            .unit = "s",
+            .range = Range::Closed(0, 60),
             .help = "*Freeze slower*: water freezes only once its nucleation energy has stayed above a threshold this long,",
             .doc = "so running water stays liquid and what lingers freezes (thinner glaze that follows the surface, longer "
                    "icicles under edges); 0 freezes at the first step, as the paper ([physics.md](physics.md#phase-shift))"},
       s.freeze_delay);
-    f(Param{.name = "growth_sign", .range = Range::Closed(-1, 1),
+    f(Param{.name = "growth_sign",
+            .range = Range::Closed(-1, 1),
             .help = "−1: ice grows with the flow, downstream (the paper's figures); +1: against it,",
-            .doc = "as Eq. 31 is printed ([physics.md](physics.md#freezing-fraction-eq-31)); 0 is refused"}, s.growth_sign);
-    f(Param{.name = "gravity_growth", .range = Range::Closed(0, 10),
+            .doc = "as Eq. 31 is printed ([physics.md](physics.md#freezing-fraction-eq-31)); 0 is refused"},
+      s.growth_sign);
+    f(Param{.name = "gravity_growth",
+            .range = Range::Closed(0, 10),
             .help = "*Icicles grow down*: weight of gravity's direction added to the flow's growth direction of ice,",
             .doc = "so water below ice freezes onto it first and water arriving from above does not pile up into a mound; "
                    "glaze on solids is unaffected. 0 is the paper's Eq. 26 alone "
-                   "([physics.md](physics.md#freezing-fraction-eq-31))"}, s.gravity_growth);
-    f(Param{.name = "tip_growth", .range = Range::Closed(1, 16),
+                   "([physics.md](physics.md#freezing-fraction-eq-31))"},
+      s.gravity_growth);
+    f(Param{.name = "tip_growth",
+            .range = Range::Closed(1, 16),
             .help = "*Longer icicles*: power of the freezing fraction of water meeting ice, so water beside an icicle",
             .doc = "runs down and freezes below its tip instead of thickening its sides; 1 is the paper's Eq. 31 "
-                   "([physics.md](physics.md#freezing-fraction-eq-31))"}, s.tip_growth);
-    f(Param{.name = "fr_mode", .help = "clamp: max(0, dot), no growth where the flow points away (the paper's text);",
-            .doc = "map: (dot+1)/2 as printed"}, s.fr_mode);
+                   "([physics.md](physics.md#freezing-fraction-eq-31))"},
+      s.tip_growth);
+    f(Param{.name = "fr_mode",
+            .help = "clamp: max(0, dot), no growth where the flow points away (the paper's text);",
+            .doc = "map: (dot+1)/2 as printed"},
+      s.fr_mode);
     f(Param{.name = "ce_mode", .help = "raw for the literal kg/m³ nucleation energy"}, s.ce_mode);
     f(Param{.name = "ce_aggregation", .help = "sum over boundary neighbours instead of their maximum"}, s.ce_aggregation);
     f(Param{.name = "pca_center", .help = "particle: the paper's literal Eq. 28 centring"}, s.pca_center);
     f(Param{.name = "growth", .help = "isotropic = the Im et al. 2013 baseline (G = I/h)"}, s.growth);
-    f(Param{.name = "k_r", .range = Range::Closed(1, 1e6), .help = "largest ratio of the fluid PCA's stretches",
-            .doc = "([physics](physics.md#fluid-anisotropy-eqs-2730-yu--turk-2013))"}, s.k_r);
+    f(Param{.name = "k_r",
+            .range = Range::Closed(1, 1e6),
+            .help = "largest ratio of the fluid PCA's stretches",
+            .doc = "([physics](physics.md#fluid-anisotropy-eqs-2730-yu--turk-2013))"},
+      s.k_r);
     f(Param{.name = "k_n", .range = Range::Positive(), .help = "stretch of particles with fewer than `n_eps` neighbours"}, s.k_n);
-    f(Param{.name = "k_s", .unit = "1/m²", .range = Range::NonNegative(), .help = "stretch scale",
-            .default_doc = "0 (automatic 1/σ_iso)"}, s.k_s);
+    f(Param{.name = "k_s", .unit = "1/m²", .range = Range::NonNegative(), .help = "stretch scale", .default_doc = "0 (automatic 1/σ_iso)"},
+      s.k_s);
     f(Param{.name = "n_eps", .range = Range::Closed(0, 1000), .help = "fewest neighbours for a trusted PCA"}, s.n_eps);
     f(Param{.name = "s_min", .range = Range::Positive(), .help = "smallest stretch"}, s.s_min);
     f(Param{.name = "s_max", .range = Range::Positive(), .help = "largest stretch (at least `s_min`)"}, s.s_max);
@@ -356,16 +417,16 @@ inline std::span<const std::string_view> Names(SolidShape) {
 
 /// A solid the water collides with, sticks to and freezes on.
 struct SolidObject {
-  std::string name;             // set to solid<k> before loading
+  std::string name;  // set to solid<k> before loading
   SolidShape shape = SolidShape::kBox;
-  std::filesystem::path mesh;   // relative to the scene file
+  std::filesystem::path mesh;  // relative to the scene file
   Vec3d size{1, 1, 1};
   double radius = 0.5;
   double minor_radius = 0.1;
   double height = 1.0;
   bool container = false;
   bool merge_meshes = true;
-  double spacing_ratio = 0.5;   // spec §3
+  double spacing_ratio = 0.5;  // spec §3
   Transform transform;
   // Motion (kinematic): constant spin about an axis through spin_center, and/or keyframes.
   Vec3d spin_axis{0, 0, 1};
@@ -378,18 +439,21 @@ struct SolidObject {
   static void Visit(Self& s, F&& f) {
     f(Param{.name = "name", .help = "unique; the boundary file is `<name>.h5part`", .default_doc = "`solid<k>`"}, s.name);
     f(Param{.name = "shape", .help = "procedural shape, or a mesh file"}, s.shape);
-    f(Param{.name = "mesh", .unit = "path", .help = "only with `shape = \"mesh\"`, relative to the scene file",
-            .default_doc = "(none)"}, s.mesh);
+    f(Param{.name = "mesh", .unit = "path", .help = "only with `shape = \"mesh\"`, relative to the scene file", .default_doc = "(none)"},
+      s.mesh);
     f(Param{.name = "size", .unit = "m", .range = Range::Positive(), .help = "box extents; a plane uses x and y"}, s.size);
     f(Param{.name = "radius", .unit = "m", .range = Range::Positive(), .help = "sphere, cylinder, torus major radius"}, s.radius);
-    f(Param{.name = "minor_radius", .unit = "m", .range = Range::Positive(), .help = "torus tube radius, below `radius`"},
-      s.minor_radius);
+    f(Param{.name = "minor_radius", .unit = "m", .range = Range::Positive(), .help = "torus tube radius, below `radius`"}, s.minor_radius);
     f(Param{.name = "height", .unit = "m", .range = Range::Positive(), .help = "cylinder"}, s.height);
     f(Param{.name = "container", .help = "box only: open top, walls facing inward (a tank the water sits in)"}, s.container);
     f(Param{.name = "merge_meshes", .help = "false samples the meshes of a multi-mesh file separately (`--separate-parts`)"},
       s.merge_meshes);
-    f(Param{.name = "spacing_ratio", .unit = "d_p", .range = Range::Closed(0.1, 1.0), .help = "boundary spacing d_b / d_p",
-            .flag = "--spacing-ratio"}, s.spacing_ratio);
+    f(Param{.name = "spacing_ratio",
+            .unit = "d_p",
+            .range = Range::Closed(0.1, 1.0),
+            .help = "boundary spacing d_b / d_p",
+            .flag = "--spacing-ratio"},
+      s.spacing_ratio);
     Transform::Visit(s.transform, f);
     f(Param{.name = "spin_axis", .help = "axis of a constant spin (not zero)"}, s.spin_axis);
     f(Param{.name = "spin_rate", .unit = "rad/s", .help = "spin rate (0: no spin)"}, s.spin_rate);
@@ -420,12 +484,14 @@ struct FluidBlock {
   static void Visit(Self& s, F&& f) {
     f(Param{.name = "shape", .help = "a box, or a sphere"}, s.shape);
     f(Param{.name = "min", .unit = "m", .help = "box corner: the lattice of spacing d_p starts here"}, s.min);
-    f(Param{.name = "max", .unit = "m", .help = "box corner, beyond `min` on every axis",
+    f(Param{.name = "max",
+            .unit = "m",
+            .help = "box corner, beyond `min` on every axis",
             .doc = "(included when the extent is a multiple of d_p: the sphere drop's 0.3 × 0.3 × 0.24 m block holds "
-                   "16 × 16 × 13 = 3,328 particles)"}, s.max);
+                   "16 × 16 × 13 = 3,328 particles)"},
+      s.max);
     f(Param{.name = "center", .unit = "m", .help = "sphere centre"}, s.center);
-    f(Param{.name = "radius", .unit = "m", .range = Range::Positive(), .help = "sphere: lattice points within it of `center`"},
-      s.radius);
+    f(Param{.name = "radius", .unit = "m", .range = Range::Positive(), .help = "sphere: lattice points within it of `center`"}, s.radius);
     f(Param{.name = "velocity", .unit = "m/s", .help = "initial velocity"}, s.velocity);
   }
 };
@@ -461,8 +527,8 @@ struct Emitter {
     f(Param{.name = "height", .unit = "m", .range = Range::Positive(), .help = "rectangle, in the nozzle plane"}, s.height);
     f(Param{.name = "speed", .unit = "m/s", .range = Range::Positive(), .help = "speed of the emitted water"}, s.speed);
     f(Param{.name = "start", .unit = "s", .range = Range::NonNegative(), .help = "when the nozzle opens"}, s.start);
-    f(Param{.name = "stop", .unit = "s", .range = Range::NonNegative(), .help = "when it closes, after `start`",
-            .default_doc = "never"}, s.stop);
+    f(Param{.name = "stop", .unit = "s", .range = Range::NonNegative(), .help = "when it closes, after `start`", .default_doc = "never"},
+      s.stop);
   }
 };
 
@@ -503,8 +569,8 @@ struct Scene {
 
 /// Bounds far beyond any bake this project runs, so that a typo (spacing 1e-9, end_time 1e9) is
 /// refused at load time instead of exhausting memory or disk hours later.
-inline constexpr double kMaxSceneParticles = 1e9;      // per water block or emitter, at [water] spacing
-inline constexpr std::int64_t kMaxSceneFrames = 1'000'000;  // end_time * fps
+inline constexpr double kMaxSceneParticles = 1e9;                              // per water block or emitter, at [water] spacing
+inline constexpr std::int64_t kMaxSceneFrames = 1'000'000;                     // end_time * fps
 inline constexpr std::uintmax_t kMaxSceneFileBytes = std::uintmax_t(1) << 28;  // 256 MiB
 
 /// Names accepted in `[sim] modules = [...]`.

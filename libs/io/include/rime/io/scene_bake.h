@@ -26,17 +26,17 @@ struct BakeSettings {
 
   template <class Self, class F>
   static void Visit(Self& s, F&& f) {
-    f(Param{.name = "preview_width", .unit = "px", .range = Range::Closed(16, 16384), .help = "rendered image width"},
-      s.preview_width);
-    f(Param{.name = "preview_height", .unit = "px", .range = Range::Closed(16, 16384), .help = "rendered image height"},
-      s.preview_height);
+    f(Param{.name = "preview_width", .unit = "px", .range = Range::Closed(16, 16384), .help = "rendered image width"}, s.preview_width);
+    f(Param{.name = "preview_height", .unit = "px", .range = Range::Closed(16, 16384), .help = "rendered image height"}, s.preview_height);
     f(Param{.name = "preview_engine", .help = "Blender render engine"}, s.preview_engine);
-    f(Param{.name = "preview_samples", .range = Range::Closed(1, 65536),
-            .help = "Cycles samples per pixel (Workbench ignores it)"}, s.preview_samples);
+    f(Param{.name = "preview_samples", .range = Range::Closed(1, 65536), .help = "Cycles samples per pixel (Workbench ignores it)"},
+      s.preview_samples);
     f(Param{.name = "contact_sheet_columns", .range = Range::Closed(1, 64), .help = "frames per row of `contact_sheet.png`"},
       s.contact_sheet_columns);
-    f(Param{.name = "preview_view", .range = Range::Closed(-1e6, 1e6),
-            .help = "direction from the scene's centre to the camera (z up), not the zero vector; the camera always frames the whole `[domain]`"},
+    f(Param{.name = "preview_view",
+            .range = Range::Closed(-1e6, 1e6),
+            .help = "direction from the scene's centre to the camera (z up), not the zero vector; the camera always frames the whole "
+                    "`[domain]`"},
       s.preview_view);
   }
 };

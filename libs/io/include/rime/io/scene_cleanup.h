@@ -64,7 +64,7 @@ struct CleanupSettings {
   // 5. Isotropic remeshing (CGAL isotropic_remeshing). Off by default: it alone costs about
   // 9 us per input triangle, more than the whole default chain (README "rime-clean").
   bool remesh = false;
-  double target_edge = 0;           // m; 0 = target_edge_factor x mean input edge length
+  double target_edge = 0;  // m; 0 = target_edge_factor x mean input edge length
   double target_edge_factor = 1.0;
   int remesh_iterations = 1;
 
@@ -81,8 +81,9 @@ struct CleanupSettings {
   double decimate_max_error = 0;  // m
 
   // 7. Smoothing, after decimation: it evens out the triangles the collapses leave.
-  // "tangential": tangential relaxation (moves vertices within the tangent plane, keeps the volume); "angle": angle smoothing (CGAL angle_and_area_smoothing without area
-  // term, which needs Ceres); "none". Shape smoothing (mean-curvature flow) is separate, off by default.
+  // "tangential": tangential relaxation (moves vertices within the tangent plane, keeps the volume); "angle": angle smoothing (CGAL
+  // angle_and_area_smoothing without area term, which needs Ceres); "none". Shape smoothing (mean-curvature flow) is separate, off by
+  // default.
   MeshSmoothing smooth = MeshSmoothing::kTangential;
   int smooth_iterations = 2;
   int shape_smooth_iterations = 0;
@@ -97,63 +98,112 @@ struct CleanupSettings {
 
   template <class Self, class F>
   static void Visit(Self& s, F&& f) {
-    f(Param{.name = "repair", .help = "1. Soup repair: auto (only when the faces are not a manifold mesh), always, never",
-            .flag = "--repair"}, s.repair);
+    f(Param{.name = "repair",
+            .help = "1. Soup repair: auto (only when the faces are not a manifold mesh), always, never",
+            .flag = "--repair"},
+      s.repair);
     f(Param{.name = "remove_degenerate", .help = "2. Remove zero-area faces", .flag = "!--no-degenerate"}, s.remove_degenerate);
-    f(Param{.name = "remove_almost_degenerate", .help = "2. Also remove caps and needles (CGAL experimental, slow)",
-            .flag = "--almost-degenerate"}, s.remove_almost_degenerate);
-    f(Param{.name = "cap_angle_deg", .unit = "degree", .range = Range::Open(90, 180),
-            .help = "2. Cap: a triangle with an angle above this", .flag = "--cap-angle"}, s.cap_angle_deg);
-    f(Param{.name = "needle_ratio", .range = Range::OpenClosed(1, 1e300), .help = "2. Needle: longest/shortest edge above this",
-            .flag = "--needle-ratio"}, s.needle_ratio);
-    f(Param{.name = "remove_components", .help = "3. Remove small connected components", .flag = "!--no-components"},
-      s.remove_components);
-    f(Param{.name = "min_component_faces", .unit = "faces", .range = Range::Closed(0, 1e9),
-            .help = "3. Remove components with fewer faces (the largest always stays; 0 = off)", .flag = "--min-component-faces"},
+    f(Param{.name = "remove_almost_degenerate",
+            .help = "2. Also remove caps and needles (CGAL experimental, slow)",
+            .flag = "--almost-degenerate"},
+      s.remove_almost_degenerate);
+    f(Param{.name = "cap_angle_deg",
+            .unit = "degree",
+            .range = Range::Open(90, 180),
+            .help = "2. Cap: a triangle with an angle above this",
+            .flag = "--cap-angle"},
+      s.cap_angle_deg);
+    f(Param{.name = "needle_ratio",
+            .range = Range::OpenClosed(1, 1e300),
+            .help = "2. Needle: longest/shortest edge above this",
+            .flag = "--needle-ratio"},
+      s.needle_ratio);
+    f(Param{.name = "remove_components", .help = "3. Remove small connected components", .flag = "!--no-components"}, s.remove_components);
+    f(Param{.name = "min_component_faces",
+            .unit = "faces",
+            .range = Range::Closed(0, 1e9),
+            .help = "3. Remove components with fewer faces (the largest always stays; 0 = off)",
+            .flag = "--min-component-faces"},
       s.min_component_faces);
-    f(Param{.name = "min_component_area", .unit = "m²", .range = Range::NonNegative(),
-            .help = "3. ... or a smaller area (0 = off)", .flag = "--min-component-area"}, s.min_component_area);
-    f(Param{.name = "min_component_volume", .unit = "m³", .range = Range::NonNegative(),
-            .help = "3. ... or a smaller volume, closed components only (0 = off)", .flag = "--min-component-volume"},
+    f(Param{.name = "min_component_area",
+            .unit = "m²",
+            .range = Range::NonNegative(),
+            .help = "3. ... or a smaller area (0 = off)",
+            .flag = "--min-component-area"},
+      s.min_component_area);
+    f(Param{.name = "min_component_volume",
+            .unit = "m³",
+            .range = Range::NonNegative(),
+            .help = "3. ... or a smaller volume, closed components only (0 = off)",
+            .flag = "--min-component-volume"},
       s.min_component_volume);
     f(Param{.name = "fill_holes", .help = "4. Fill holes", .flag = "!--no-fill-holes"}, s.fill_holes);
-    f(Param{.name = "max_hole_edges", .unit = "edges", .range = Range::Closed(3, 1e9),
-            .help = "4. Fill holes with at most this many border edges", .flag = "--max-hole-edges"}, s.max_hole_edges);
+    f(Param{.name = "max_hole_edges",
+            .unit = "edges",
+            .range = Range::Closed(3, 1e9),
+            .help = "4. Fill holes with at most this many border edges",
+            .flag = "--max-hole-edges"},
+      s.max_hole_edges);
     f(Param{.name = "fair_holes", .help = "4. Fair the filled holes (else triangulate and refine only)", .flag = "!--no-fair"},
       s.fair_holes);
-    f(Param{.name = "remesh", .help = "5. Isotropic remeshing (off by default: slow)", .flag = "--remesh,!--no-remesh"},
-      s.remesh);
-    f(Param{.name = "target_edge", .unit = "m", .range = Range::NonNegative(),
-            .help = "5. Remeshing edge length (the flag implies --remesh)", .flag = "--target-edge",
-            .default_doc = "0 (= factor × mean input edge)"}, s.target_edge);
-    f(Param{.name = "target_edge_factor", .range = Range::OpenClosed(0, 100), .help = "5. Target edge / mean input edge",
-            .flag = "--target-edge-factor"}, s.target_edge_factor);
-    f(Param{.name = "remesh_iterations", .range = Range::Closed(1, 100), .help = "5. Remeshing iterations",
-            .flag = "--remesh-iterations"}, s.remesh_iterations);
+    f(Param{.name = "remesh", .help = "5. Isotropic remeshing (off by default: slow)", .flag = "--remesh,!--no-remesh"}, s.remesh);
+    f(Param{.name = "target_edge",
+            .unit = "m",
+            .range = Range::NonNegative(),
+            .help = "5. Remeshing edge length (the flag implies --remesh)",
+            .flag = "--target-edge",
+            .default_doc = "0 (= factor × mean input edge)"},
+      s.target_edge);
+    f(Param{.name = "target_edge_factor",
+            .range = Range::OpenClosed(0, 100),
+            .help = "5. Target edge / mean input edge",
+            .flag = "--target-edge-factor"},
+      s.target_edge_factor);
+    f(Param{.name = "remesh_iterations", .range = Range::Closed(1, 100), .help = "5. Remeshing iterations", .flag = "--remesh-iterations"},
+      s.remesh_iterations);
     f(Param{.name = "decimate", .help = "6. Decimate", .flag = "!--no-decimate"}, s.decimate);
     f(Param{.name = "decimate_method",
             .help = "6. batch (rime's quadric collapse in sorted passes, fast) or cgal (CGAL edge_collapse)",
-            .flag = "--decimate-method"}, s.decimate_method);
-    f(Param{.name = "decimate_ratio", .range = Range::OpenClosed(0, 1), .help = "6. Keep this fraction of the faces",
-            .flag = "--decimate-ratio"}, s.decimate_ratio);
-    f(Param{.name = "decimate_faces", .unit = "faces", .range = Range::Closed(0, 1e15),
-            .help = "6. Target face count (overrides the ratio)", .flag = "--decimate-faces",
-            .default_doc = "0 (= use the ratio)"}, s.decimate_faces);
-    f(Param{.name = "decimate_max_error", .unit = "m", .range = Range::NonNegative(),
+            .flag = "--decimate-method"},
+      s.decimate_method);
+    f(Param{.name = "decimate_ratio",
+            .range = Range::OpenClosed(0, 1),
+            .help = "6. Keep this fraction of the faces",
+            .flag = "--decimate-ratio"},
+      s.decimate_ratio);
+    f(Param{.name = "decimate_faces",
+            .unit = "faces",
+            .range = Range::Closed(0, 1e15),
+            .help = "6. Target face count (overrides the ratio)",
+            .flag = "--decimate-faces",
+            .default_doc = "0 (= use the ratio)"},
+      s.decimate_faces);
+    f(Param{.name = "decimate_max_error",
+            .unit = "m",
+            .range = Range::NonNegative(),
             .help = "6. Also stop when a collapse would move the surface more than this (RMS plane distance; 0 = off)",
-            .flag = "--decimate-max-error"}, s.decimate_max_error);
+            .flag = "--decimate-max-error"},
+      s.decimate_max_error);
     f(Param{.name = "smooth", .help = "7. tangential (relaxation, keeps volume), angle, none", .flag = "--smooth"}, s.smooth);
-    f(Param{.name = "smooth_iterations", .range = Range::Closed(0, 1000), .help = "7. Smoothing iterations",
-            .flag = "--smooth-iterations"}, s.smooth_iterations);
-    f(Param{.name = "shape_smooth_iterations", .range = Range::Closed(0, 1000),
-            .help = "7. Mean-curvature-flow iterations, volume restored afterwards (0 = off)", .flag = "--shape-smooth-iterations"},
+    f(Param{.name = "smooth_iterations", .range = Range::Closed(0, 1000), .help = "7. Smoothing iterations", .flag = "--smooth-iterations"},
+      s.smooth_iterations);
+    f(Param{.name = "shape_smooth_iterations",
+            .range = Range::Closed(0, 1000),
+            .help = "7. Mean-curvature-flow iterations, volume restored afterwards (0 = off)",
+            .flag = "--shape-smooth-iterations"},
       s.shape_smooth_iterations);
-    f(Param{.name = "shape_smooth_time", .unit = "m²", .range = Range::Positive(),
-            .help = "7. Mean-curvature-flow time step (larger smooths more)", .flag = "--shape-smooth-time"}, s.shape_smooth_time);
-    f(Param{.name = "self_intersections", .help = "8. report (count pairs), remove (CGAL experimental), off",
-            .flag = "--self-intersections"}, s.self_intersections);
-    f(Param{.name = "transfer_velocity", .help = "Carry per-vertex velocities from the nearest input point",
-            .flag = "!--no-velocity"}, s.transfer_velocity);
+    f(Param{.name = "shape_smooth_time",
+            .unit = "m²",
+            .range = Range::Positive(),
+            .help = "7. Mean-curvature-flow time step (larger smooths more)",
+            .flag = "--shape-smooth-time"},
+      s.shape_smooth_time);
+    f(Param{.name = "self_intersections",
+            .help = "8. report (count pairs), remove (CGAL experimental), off",
+            .flag = "--self-intersections"},
+      s.self_intersections);
+    f(Param{.name = "transfer_velocity", .help = "Carry per-vertex velocities from the nearest input point", .flag = "!--no-velocity"},
+      s.transfer_velocity);
   }
 };
 

@@ -53,45 +53,76 @@ struct SurfaceSettings {
     f(Param{.name = "phase", .help = "which particles to surface", .flag = "--phase"}, s.phase);
     f(Param{.name = "ice_field",
             .help = "field of the ice: ellipsoids (union of anisotropic ellipsoids, Eq. 41), kernel_sum (Yu & Turk sum of "
-                    "anisotropic kernels at `iso`) or isotropic (spheres of radius `r_iso`)"}, s.ice_field);
+                    "anisotropic kernels at `iso`) or isotropic (spheres of radius `r_iso`)"},
+      s.ice_field);
     f(Param{.name = "water_field", .help = "field of the water, as `ice_field`"}, s.water_field);
-    f(Param{.name = "voxel_ratio", .unit = "d_p", .range = Range::Closed(0.02, 4),
-            .help = "voxel size / particle spacing (unless `voxel_size` or `resolution` is set)"}, s.voxel_ratio);
-    f(Param{.name = "voxel_size", .unit = "m", .range = Range::NonNegative(), .help = "voxel size", .flag = "--voxel-size",
-            .default_doc = "0 (use `voxel_ratio`)"}, s.voxel_size);
-    f(Param{.name = "resolution", .unit = "nodes", .range = Range::Closed(0, 4096),
+    f(Param{.name = "voxel_ratio",
+            .unit = "d_p",
+            .range = Range::Closed(0.02, 4),
+            .help = "voxel size / particle spacing (unless `voxel_size` or `resolution` is set)"},
+      s.voxel_ratio);
+    f(Param{.name = "voxel_size",
+            .unit = "m",
+            .range = Range::NonNegative(),
+            .help = "voxel size",
+            .flag = "--voxel-size",
+            .default_doc = "0 (use `voxel_ratio`)"},
+      s.voxel_size);
+    f(Param{.name = "resolution",
+            .unit = "nodes",
+            .range = Range::Closed(0, 4096),
             .help = "the paper's fixed grid: voxel = longest side of the padded bounding box / (N − 1), e.g. 200; 0 is off, 1 refused",
-            .flag = "--resolution"}, s.resolution);
-    f(Param{.name = "r_iso", .unit = "d_p", .range = Range::OpenClosed(0, 4), .help = "ellipsoid level r_iso", .flag = "--r-iso"},
-      s.r_iso);
-    f(Param{.name = "lambda", .range = Range::Closed(0, 1), .help = "Yu & Turk centre smoothing, 0 = off", .flag = "--lambda"},
-      s.lambda);
+            .flag = "--resolution"},
+      s.resolution);
+    f(Param{.name = "r_iso", .unit = "d_p", .range = Range::OpenClosed(0, 4), .help = "ellipsoid level r_iso", .flag = "--r-iso"}, s.r_iso);
+    f(Param{.name = "lambda", .range = Range::Closed(0, 1), .help = "Yu & Turk centre smoothing, 0 = off", .flag = "--lambda"}, s.lambda);
     f(Param{.name = "k_r", .range = Range::Closed(1, 1000), .help = "largest stretch ratio k_r", .flag = "--kr"}, s.k_r);
-    f(Param{.name = "k_s", .unit = "1/m²", .range = Range::NonNegative(),
-            .help = "stretch scale k_s; 0 = automatic 1/(0.2994 h²)", .flag = "--ks"}, s.k_s);
-    f(Param{.name = "k_n", .range = Range::OpenClosed(0, 10),
+    f(Param{.name = "k_s",
+            .unit = "1/m²",
+            .range = Range::NonNegative(),
+            .help = "stretch scale k_s; 0 = automatic 1/(0.2994 h²)",
+            .flag = "--ks"},
+      s.k_s);
+    f(Param{.name = "k_n",
+            .range = Range::OpenClosed(0, 10),
             .help = "stretch of particles with fewer than N_eps neighbours (kernel_sum only: ellipsoids are scaled to the "
-                    "r_iso sphere volume)", .flag = "--kn"}, s.k_n);
-    f(Param{.name = "n_eps", .range = Range::Closed(0, 1000), .help = "fewest neighbours N_eps for a trusted PCA",
-            .flag = "--neps"}, s.n_eps);
+                    "r_iso sphere volume)",
+            .flag = "--kn"},
+      s.k_n);
+    f(Param{.name = "n_eps", .range = Range::Closed(0, 1000), .help = "fewest neighbours N_eps for a trusted PCA", .flag = "--neps"},
+      s.n_eps);
     f(Param{.name = "iso", .range = Range::Positive(), .help = "iso value of the kernel_sum field", .flag = "--iso"}, s.iso);
     f(Param{.name = "half_band", .unit = "voxels", .range = Range::Closed(3, 64), .help = "narrow band half width"}, s.half_band);
-    f(Param{.name = "close", .unit = "d_p", .range = Range::Closed(0, 4),
+    f(Param{.name = "close",
+            .unit = "d_p",
+            .range = Range::Closed(0, 4),
             .help = "closing radius: dilates, then erodes the level set, filling gaps narrower than twice it",
-            .doc = "(OpenVDB); real sheets keep their thickness", .flag = "--close"}, s.close);
-    f(Param{.name = "smooth", .unit = "iterations", .range = Range::Closed(0, 100),
+            .doc = "(OpenVDB); real sheets keep their thickness",
+            .flag = "--close"},
+      s.close);
+    f(Param{.name = "smooth",
+            .unit = "iterations",
+            .range = Range::Closed(0, 100),
             .help = "OpenVDB level-set mean-curvature smoothing after the closing, for the ellipsoids and isotropic fields",
             .doc = "(ice); removes particle-sized bumps (10 takes the sphere drop's noise from 0.081 to 0.049 d_p, "
-                   "[ice-look.md](ice-look.md))", .flag = "--smooth"}, s.smooth);
-    f(Param{.name = "velocity", .help = "add a `vel` vec3 grid (particle velocities, for motion blur) to the VDB",
-            .flag = "--vel"}, s.velocity);
-    f(Param{.name = "density", .help = "add a `density` fog grid (Blender's volume shader shows it without setup)",
-            .flag = "--density"}, s.density);
-    f(Param{.name = "formats", .help = "outputs, at least one (on the command line: comma-separated)", .flag = "--format",
-            .choices = kSurfaceFormats}, s.formats);
-    f(Param{.name = "memory_budget_gb", .unit = "GB (10⁹ bytes)", .range = Range::NonNegative(),
+                   "[ice-look.md](ice-look.md))",
+            .flag = "--smooth"},
+      s.smooth);
+    f(Param{.name = "velocity", .help = "add a `vel` vec3 grid (particle velocities, for motion blur) to the VDB", .flag = "--vel"},
+      s.velocity);
+    f(Param{.name = "density", .help = "add a `density` fog grid (Blender's volume shader shows it without setup)", .flag = "--density"},
+      s.density);
+    f(Param{.name = "formats",
+            .help = "outputs, at least one (on the command line: comma-separated)",
+            .flag = "--format",
+            .choices = kSurfaceFormats},
+      s.formats);
+    f(Param{.name = "memory_budget_gb",
+            .unit = "GB (10⁹ bytes)",
+            .range = Range::NonNegative(),
             .help = "rime-surface's memory budget when `--memory-budget` is not given",
-            .doc = "([tools.md](tools.md#common-conventions-of-every-tool))", .default_doc = "0 (the memory available)"},
+            .doc = "([tools.md](tools.md#common-conventions-of-every-tool))",
+            .default_doc = "0 (the memory available)"},
       s.memory_budget_gb);
   }
 };

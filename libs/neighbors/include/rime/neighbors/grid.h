@@ -48,9 +48,7 @@ class UniformGrid {
   /// cells, which lets QueryGrid work cell by cell. Falls back to a computed origin (and says so
   /// through aligned_with) when a point lies below `origin`.
   void Build(const Vec3<T>* points, Index n, T cell_size, const Vec3<T>& origin);
-  bool aligned_with(const UniformGrid& other) const {
-    return view_.origin == other.view_.origin && cell_size_ == other.cell_size_;
-  }
+  bool aligned_with(const UniformGrid& other) const { return view_.origin == other.view_.origin && cell_size_ == other.cell_size_; }
 
   /// sorted slot -> original index: the Z-curve order, for callers that reorder their arrays.
   const std::uint32_t* order() const { return sorted_index_.data(); }

@@ -47,9 +47,9 @@ struct GridView {
   const std::uint64_t* table_keys = nullptr;   // hash slot -> cell key (kEmptySlot = empty)
   const std::uint32_t* table_cells = nullptr;  // hash slot -> cell index
   std::uint32_t table_mask = 0;
-  const std::uint32_t* cell_start = nullptr;   // cell index -> first sorted slot; cell_start[cells] = n
-  const std::uint32_t* sorted_index = nullptr; // sorted slot -> original point index
-  const Vec3<T>* points = nullptr;             // original point positions
+  const std::uint32_t* cell_start = nullptr;    // cell index -> first sorted slot; cell_start[cells] = n
+  const std::uint32_t* sorted_index = nullptr;  // sorted slot -> original point index
+  const Vec3<T>* points = nullptr;              // original point positions
   std::uint32_t count = 0;
   // CPU only, optional: the cell index of every lattice position of a box (kNoCell where empty),
   // read instead of probing the hash table (neighbouring cells are neighbouring words).
@@ -339,12 +339,12 @@ struct BoundsComponents {
 }  // namespace kernels
 }  // namespace rime::neighbors
 
-#define RIME_NEIGHBORS_KERNELS(X)                                                                    \
-  X(rime::neighbors::kernels::CellKeys<float>) X(rime::neighbors::kernels::CellKeys<double>)        \
-  X(rime::neighbors::kernels::MarkCellStarts) X(rime::neighbors::kernels::InsertCells)              \
-  X(rime::neighbors::kernels::CountNeighbors<float>) X(rime::neighbors::kernels::CountNeighbors<double>) \
-  X(rime::neighbors::kernels::FillNeighbors<float>) X(rime::neighbors::kernels::FillNeighbors<double>)   \
-  X(rime::neighbors::kernels::BoundsComponents<float>) X(rime::neighbors::kernels::BoundsComponents<double>)         \
-  X(rime::neighbors::kernels::CountNeighborsByCell<float>) X(rime::neighbors::kernels::CountNeighborsByCell<double>) \
-  X(rime::neighbors::kernels::FillNeighborsByCell<float>) X(rime::neighbors::kernels::FillNeighborsByCell<double>) \
-  X(rime::neighbors::kernels::PairValues<float>) X(rime::neighbors::kernels::PairValues<double>)
+#define RIME_NEIGHBORS_KERNELS(X)                                                                                                      \
+  X(rime::neighbors::kernels::CellKeys<float>)                                                                                         \
+  X(rime::neighbors::kernels::CellKeys<double>) X(rime::neighbors::kernels::MarkCellStarts) X(rime::neighbors::kernels::InsertCells)   \
+      X(rime::neighbors::kernels::CountNeighbors<float>) X(rime::neighbors::kernels::CountNeighbors<double>)                           \
+          X(rime::neighbors::kernels::FillNeighbors<float>) X(rime::neighbors::kernels::FillNeighbors<double>)                         \
+              X(rime::neighbors::kernels::BoundsComponents<float>) X(rime::neighbors::kernels::BoundsComponents<double>)               \
+                  X(rime::neighbors::kernels::CountNeighborsByCell<float>) X(rime::neighbors::kernels::CountNeighborsByCell<double>)   \
+                      X(rime::neighbors::kernels::FillNeighborsByCell<float>) X(rime::neighbors::kernels::FillNeighborsByCell<double>) \
+                          X(rime::neighbors::kernels::PairValues<float>) X(rime::neighbors::kernels::PairValues<double>)

@@ -254,8 +254,8 @@ struct AirPressureAcceleration {
 /// a_i^p of Eq. 12 for the pressures p: symmetric between water particles, Akinci pressure
 /// mirroring at boundary particles.
 template <class T>
-RIME_HDI Vec3<T> PressureAcceleration(Index i, const Pairs<T>& ff, const Pairs<T>& fb, const T* p, const T* density,
-                                      const T* boundary_psi, T mass) {
+RIME_HDI Vec3<T> PressureAcceleration(Index i, const Pairs<T>& ff, const Pairs<T>& fb, const T* p, const T* density, const T* boundary_psi,
+                                      T mass) {
   const T rhoi = density[i], pi_term = p[i] / (rhoi * rhoi);
   Vec3<T> a{};
   for (std::uint32_t k = ff.offsets[i], e = ff.offsets[i + 1]; k < e; ++k) {
@@ -414,8 +414,7 @@ struct PressureUpdate {
       const Vec3<T> dji_pi = ff.grad[k] * (dt2 * mass * pi / (rhoi * rhoi));
       sigma += mass * Dot(si - d_ii[j] * pressure[j] - (s[j] - dji_pi), ff.grad[k]);
     }
-    for (std::uint32_t k = fb.offsets[i], e = fb.offsets[i + 1]; k < e; ++k)
-      sigma += boundary_psi[fb.index[k]] * Dot(si, fb.grad[k]);
+    for (std::uint32_t k = fb.offsets[i], e = fb.offsets[i + 1]; k < e; ++k) sigma += boundary_psi[fb.index[k]] * Dot(si, fb.grad[k]);
     const T aii = a_ii[i];
     T p = T(0);
     if (aii < -min_aii || aii > min_aii) {
@@ -536,16 +535,16 @@ struct MarkListed {
 }  // namespace rime::sph
 
 // Kernels of both precisions; Gather of the anisotropy (exec lists the other attribute types).
-#define RIME_SPH_KERNELS_T(X, T)                                                                                   \
-  X(rime::sph::kernels::Density<T>) X(rime::sph::kernels::Compression<T>) X(rime::sph::kernels::InitAcceleration<T>) \
-  X(rime::sph::kernels::ViscosityAcceleration<T>) X(rime::sph::kernels::SurfaceColor<T>)                           \
-  X(rime::sph::kernels::SurfaceEnergy<T>) X(rime::sph::kernels::SurfaceTensionAcceleration<T>)                     \
-  X(rime::sph::kernels::AkinciNormal<T>) X(rime::sph::kernels::AkinciSurfaceTensionAcceleration<T>)                 \
-  X(rime::sph::kernels::AirPressureAcceleration<T>) X(rime::sph::kernels::AdvectVelocity<T>)                       \
-  X(rime::sph::kernels::PredictAdvection<T>) X(rime::sph::kernels::DisplacementSum<T>)                             \
-  X(rime::sph::kernels::PressureUpdate<T>) X(rime::sph::kernels::IntegratePressure<T>)                             \
-  X(rime::sph::kernels::SquaredSpeed<T>) X(rime::sph::kernels::Heights<T>) X(rime::sph::kernels::CapIceVolume<T>) X(rime::sph::kernels::Scale<T>) X(rime::sph::kernels::MoveBoundary<T>) X(rime::sph::kernels::InsideDomain<T>) \
-  X(rime::exec::Gather<rime::freeze::Sym6<T>>)
+#define RIME_SPH_KERNELS_T(X, T)                                                                                                          \
+  X(rime::sph::kernels::Density<T>)                                                                                                       \
+  X(rime::sph::kernels::Compression<T>) X(rime::sph::kernels::InitAcceleration<T>) X(rime::sph::kernels::ViscosityAcceleration<T>)        \
+      X(rime::sph::kernels::SurfaceColor<T>) X(rime::sph::kernels::SurfaceEnergy<T>) X(rime::sph::kernels::SurfaceTensionAcceleration<T>) \
+          X(rime::sph::kernels::AkinciNormal<T>) X(rime::sph::kernels::AkinciSurfaceTensionAcceleration<T>)                               \
+              X(rime::sph::kernels::AirPressureAcceleration<T>) X(rime::sph::kernels::AdvectVelocity<T>)                                  \
+                  X(rime::sph::kernels::PredictAdvection<T>) X(rime::sph::kernels::DisplacementSum<T>)                                    \
+                      X(rime::sph::kernels::PressureUpdate<T>) X(rime::sph::kernels::IntegratePressure<T>)                                \
+                          X(rime::sph::kernels::SquaredSpeed<T>) X(rime::sph::kernels::Heights<T>) X(rime::sph::kernels::CapIceVolume<T>) \
+                              X(rime::sph::kernels::Scale<T>) X(rime::sph::kernels::MoveBoundary<T>)                                      \
+                                  X(rime::sph::kernels::InsideDomain<T>) X(rime::exec::Gather<rime::freeze::Sym6<T>>)
 
-#define RIME_SPH_KERNELS(X)                                                                        \
-  RIME_SPH_KERNELS_T(X, float) RIME_SPH_KERNELS_T(X, double) X(rime::sph::kernels::MarkListed)
+#define RIME_SPH_KERNELS(X) RIME_SPH_KERNELS_T(X, float) RIME_SPH_KERNELS_T(X, double) X(rime::sph::kernels::MarkListed)

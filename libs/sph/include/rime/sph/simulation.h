@@ -49,7 +49,7 @@ struct StepStats {
   // it is 2-4 times the prediction: the estimate reports about (1 − ω) of the residual, and the
   // solve counts wall particles as pushed by p_i.
   double measured_density_error = 0;
-  double max_speed = 0;              // m/s after the step
+  double max_speed = 0;  // m/s after the step
   std::int64_t fluid_particles = 0;
   std::int64_t removed_particles = 0;  // left the domain during this step
   std::int64_t emitted_particles = 0;
@@ -140,11 +140,11 @@ class Simulation {
   std::int64_t step_count_ = 0;
   std::int64_t next_id_ = 0;
   std::int64_t removed_total_ = 0;
-  double diffusion_pending_ = 0;         // film diffusion time not yet applied, s
+  double diffusion_pending_ = 0;        // film diffusion time not yet applied, s
   std::vector<double> emitter_travel_;  // distance travelled since each emitter's last layer, m
   std::vector<std::string> object_names_;
   Vec3<T> domain_min_{}, domain_max_{};  // particles leaving this box are removed
-  Vec3<T> lattice_origin_{};              // shared origin of the water and boundary grids
+  Vec3<T> lattice_origin_{};             // shared origin of the water and boundary grids
   bool initialized_ = false;
 };
 

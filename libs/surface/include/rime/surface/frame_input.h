@@ -18,7 +18,6 @@ struct SelectOptions {
 /// root attributes `spacing` (required, > 0) and `smoothing_length` (optional, default spacing).
 /// Problems the user should know about (isotropic fallback) are appended to `warnings`.
 /// Throws rime::Error(kBadInput) naming the file and dataset for missing or invalid data.
-ParticleSet SelectPhase(const io::ParticleFrame& frame, io::Phase phase, const SelectOptions& options,
-                        std::vector<std::string>& warnings);
+ParticleSet SelectPhase(const io::ParticleFrame& frame, io::Phase phase, const SelectOptions& options, std::vector<std::string>& warnings);
 
 }  // namespace rime::surface

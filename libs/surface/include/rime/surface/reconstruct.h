@@ -39,34 +39,34 @@ const char* FieldName(Field field);
 
 struct Settings {
   Field field = Field::kEllipsoids;
-  double voxel_size = 0;        // m; 0 = voxel_ratio * spacing
-  double voxel_ratio = 0.5;     // voxel size / d_p when voxel_size = 0
-  int resolution = 0;           // > 0: the paper's fixed grid, voxel = longest padded extent / (resolution − 1)
-  double r_iso = 0.75;          // ellipsoid level, in units of d_p (spec §10 default 0.75 d_p)
-  double lambda = 0.9;          // Yu & Turk centre smoothing over same-phase neighbours (0 = off)
+  double voxel_size = 0;                  // m; 0 = voxel_ratio * spacing
+  double voxel_ratio = 0.5;               // voxel size / d_p when voxel_size = 0
+  int resolution = 0;                     // > 0: the paper's fixed grid, voxel = longest padded extent / (resolution − 1)
+  double r_iso = 0.75;                    // ellipsoid level, in units of d_p (spec §10 default 0.75 d_p)
+  double lambda = 0.9;                    // Yu & Turk centre smoothing over same-phase neighbours (0 = off)
   anisotropy::Params<double> anisotropy;  // k_s, k_r, k_n, N_ε, s_min, s_max (spec §8)
   bool recompute_anisotropy = false;      // ice: PCA over ice neighbours instead of the stored D
-  double iso = 0.5;             // kernel_sum: surface where Σ V W_A = iso
-  double half_band = 3;         // narrow band half width, voxels (>= 3)
-  double close_radius = 0;      // d_p: morphological closing (dilate, then erode) that fills gaps narrower than twice this
-  int smooth_iterations = 0;    // OpenVDB LevelSetFilter mean-curvature iterations after the closing (not for kKernelSum)
-  bool velocity_grid = false;   // also build a `vel` vec3 grid
-  bool density_grid = false;    // also build a `density` fog grid
-  bool mesh = true;             // extract the triangle mesh
-  bool mesh_velocities = false; // per-vertex velocity interpolated from particles (PLY)
-  bool keep_voids = false;      // keep enclosed voids (gaps between ellipsoids) in the level set and mesh
-  bool deep_interior_tiles = true;  // ellipsoids/isotropic, no keep_voids, half_band <= 4: leaves deep inside
-                                    // a body become interior tiles without evaluating the field (same result)
+  double iso = 0.5;                       // kernel_sum: surface where Σ V W_A = iso
+  double half_band = 3;                   // narrow band half width, voxels (>= 3)
+  double close_radius = 0;                // d_p: morphological closing (dilate, then erode) that fills gaps narrower than twice this
+  int smooth_iterations = 0;              // OpenVDB LevelSetFilter mean-curvature iterations after the closing (not for kKernelSum)
+  bool velocity_grid = false;             // also build a `vel` vec3 grid
+  bool density_grid = false;              // also build a `density` fog grid
+  bool mesh = true;                       // extract the triangle mesh
+  bool mesh_velocities = false;           // per-vertex velocity interpolated from particles (PLY)
+  bool keep_voids = false;                // keep enclosed voids (gaps between ellipsoids) in the level set and mesh
+  bool deep_interior_tiles = true;        // ellipsoids/isotropic, no keep_voids, half_band <= 4: leaves deep inside
+                                          // a body become interior tiles without evaluating the field (same result)
 };
 
 /// One phase of one frame, ready for reconstruction.
 struct ParticleSet {
-  std::vector<Vec3d> positions;            // m
-  std::vector<Vec3f> velocities;           // m/s; empty = zero
+  std::vector<Vec3d> positions;                         // m
+  std::vector<Vec3f> velocities;                        // m/s; empty = zero
   std::vector<std::array<float, 6>> stored_anisotropy;  // D (xx yy zz xy xz yz); empty = none stored
-  double spacing = 0;                      // d_p, m
-  double smoothing_length = 0;             // h, m (0 = spacing)
-  double particle_volume = 0;              // V_i for the kernel sum, m³ (0 = spacing³)
+  double spacing = 0;                                   // d_p, m
+  double smoothing_length = 0;                          // h, m (0 = spacing)
+  double particle_volume = 0;                           // V_i for the kernel sum, m³ (0 = spacing³)
   std::size_t size() const { return positions.size(); }
 };
 
@@ -76,14 +76,14 @@ struct Stats {
   std::uint64_t leaves = 0;
   std::uint64_t deep_leaves = 0;  // leaves deep inside, filled without evaluating the field
   std::uint64_t vertices = 0, triangles = 0;
-  std::uint64_t removed_void_shells = 0;   // enclosed inward-facing mesh shells dropped
-  std::uint64_t filled_void_voxels = 0;    // enclosed outside voxels turned inside
-  double voxel_size = 0;          // m
-  double seconds_prepare = 0;     // centres and anisotropy
-  double seconds_rasterize = 0;   // field evaluation, narrow band, pruning
-  double seconds_filter = 0;      // smoothing, vel, density
+  std::uint64_t removed_void_shells = 0;  // enclosed inward-facing mesh shells dropped
+  std::uint64_t filled_void_voxels = 0;   // enclosed outside voxels turned inside
+  double voxel_size = 0;                  // m
+  double seconds_prepare = 0;             // centres and anisotropy
+  double seconds_rasterize = 0;           // field evaluation, narrow band, pruning
+  double seconds_filter = 0;              // smoothing, vel, density
   double seconds_mesh = 0;
-  std::uint64_t grid_bytes = 0;   // memory held by the level set
+  std::uint64_t grid_bytes = 0;  // memory held by the level set
 };
 
 struct Grids;  // OpenVDB grids (src/grids.h)
@@ -96,12 +96,12 @@ struct Result {
 
 /// Per-particle inputs of the field after centre smoothing and anisotropy (spec §8, §10).
 struct PreparedParticles {
-  std::vector<Vec3f> centers;              // x̄_i relative to origin, m
-  Vec3d origin;                            // subtracted from positions (float precision far from 0)
-  std::vector<std::array<float, 6>> D;     // dimensionless D_i — empty in isotropic mode; ellipsoids:
-                                           // det D = 1 unless a stretch hit s_max or the half-voxel floor
+  std::vector<Vec3f> centers;                   // x̄_i relative to origin, m
+  Vec3d origin;                                 // subtracted from positions (float precision far from 0)
+  std::vector<std::array<float, 6>> D;          // dimensionless D_i — empty in isotropic mode; ellipsoids:
+                                                // det D = 1 unless a stretch hit s_max or the half-voxel floor
   std::vector<float> min_stretch, max_stretch;  // 1/λ_max(D), 1/λ_min(D)
-  std::vector<std::uint8_t> interior;      // 1: fully surrounded (its far band cannot be the nearest)
+  std::vector<std::uint8_t> interior;           // 1: fully surrounded (its far band cannot be the nearest)
 };
 
 /// Centre smoothing and D (stored, recomputed or from a fresh PCA) — no OpenVDB here.

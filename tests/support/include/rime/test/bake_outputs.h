@@ -135,8 +135,7 @@ inline pid_t Spawn(const std::vector<std::string>& args, const std::filesystem::
 /// Waits for `pid`; returns its exit code, or 128 + signal.
 inline int WaitExit(pid_t pid) {
   int status = 0;
-  while (waitpid(pid, &status, 0) < 0 && errno == EINTR) {
-  }
+  while (waitpid(pid, &status, 0) < 0 && errno == EINTR) {}
   return WIFEXITED(status) ? WEXITSTATUS(status) : WIFSIGNALED(status) ? 128 + WTERMSIG(status) : -1;
 }
 

@@ -18,8 +18,6 @@ inline std::string ReadFile(const std::filesystem::path& path) {
   return bytes.str();
 }
 
-inline void WriteFile(const std::filesystem::path& path, const std::string& text) {
-  std::ofstream(path, std::ios::binary) << text;
-}
+inline void WriteFile(const std::filesystem::path& path, const std::string& text) { std::ofstream(path, std::ios::binary) << text; }
 
 }  // namespace rime::test
