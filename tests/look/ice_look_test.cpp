@@ -64,11 +64,9 @@ clean::IceMetrics Measure(const Glaze& g, const surface::Settings& settings) {
 
 TEST(IceLook, FilteredGlazeOnASphereIsOneSmoothCoat) {
   const Glaze glaze = GlazeOnASphere();
-  surface::Settings raw;  // the union of particle shapes, unfiltered
-  surface::Settings filtered = raw;
-  const io::SurfaceSettings defaults;  // the scene defaults rime-surface and rime-bake use
-  filtered.close_radius = defaults.close;
-  filtered.smooth_iterations = defaults.smooth;
+  const surface::Settings raw;  // the union of particle shapes, unfiltered
+  // The scene defaults rime-surface and rime-bake use.
+  const surface::Settings filtered = surface::FromScene(io::SurfaceSettings{}, surface::Field::kEllipsoids);
   const clean::IceMetrics before = Measure(glaze, raw), after = Measure(glaze, filtered);
   std::printf(
       "raw: %zu pieces, noise %.3f d_p, sharp %.1f %%, %lld handles; filtered: %zu pieces, noise %.3f d_p, sharp %.1f %%, %lld handles\n",

@@ -195,25 +195,9 @@ int main(int argc, char** argv) {
       return std::find(surfacing.formats.begin(), surfacing.formats.end(), f) != surfacing.formats.end();
     };
 
-    surface::Settings settings;
-    settings.voxel_ratio = surfacing.voxel_ratio;
-    settings.voxel_size = surfacing.voxel_size;
+    surface::Settings settings = surface::FromScene(surfacing, surfacing.ice_field);  // the field is set per phase
     // An explicit voxel size wins over the scene's fixed grid.
-    settings.resolution = overrides.Given("voxel_size") && surfacing.voxel_size > 0 ? 0 : surfacing.resolution;
-    settings.r_iso = surfacing.r_iso;
-    settings.lambda = surfacing.lambda;
-    settings.anisotropy.k_r = surfacing.k_r;
-    settings.anisotropy.k_s = surfacing.k_s;
-    settings.anisotropy.k_n = surfacing.k_n;
-    settings.anisotropy.n_eps = surfacing.n_eps;
-    settings.iso = surfacing.iso;
-    settings.half_band = surfacing.half_band;
-    settings.close_radius = surfacing.close;
-    settings.smooth_iterations = surfacing.smooth;
-    settings.velocity_grid = surfacing.velocity && has("vdb");
-    settings.density_grid = surfacing.density && has("vdb");
-    settings.mesh = has("obj") || has("ply");
-    settings.mesh_velocities = has("ply");
+    if (overrides.Given("voxel_size") && surfacing.voxel_size > 0) settings.resolution = 0;
     settings.keep_voids = o.keep_voids;
 
     std::vector<PhaseJob> jobs;

@@ -13,6 +13,7 @@
 #include <string>
 #include <vector>
 
+#include "rime/core/anisotropy.h"
 #include "rime/core/math.h"
 #include "rime/io/param.h"
 #include "rime/io/scene_cleanup.h"
@@ -311,10 +312,10 @@ struct FreezingSettings {
   CeAggregation ce_aggregation = CeAggregation::kMax;
   PcaCenter pca_center = PcaCenter::kMean;
   Growth growth = Growth::kAnisotropic;
-  double k_r = 4, k_n = 0.5;
-  double k_s = 0;  // 0: automatic 1/sigma_iso
-  int n_eps = 6;
-  double s_min = 0.125, s_max = 1.0;
+  // Yu & Turk's constants: one declaration, anisotropy::Params (spec §8); k_s = 0 is automatic.
+  double k_r = anisotropy::Params<double>{}.k_r, k_n = anisotropy::Params<double>{}.k_n, k_s = anisotropy::Params<double>{}.k_s;
+  int n_eps = anisotropy::Params<double>{}.n_eps;
+  double s_min = anisotropy::Params<double>{}.s_min, s_max = anisotropy::Params<double>{}.s_max;
 
   template <class Self, class F>
   static void Visit(Self& s, F&& f) {

@@ -7,6 +7,7 @@
 #include <string_view>
 #include <vector>
 
+#include "rime/core/anisotropy.h"
 #include "rime/io/param.h"
 
 namespace rime::io {
@@ -37,8 +38,9 @@ struct SurfaceSettings {
   int resolution = 0;
   double r_iso = 0.75;
   double lambda = 0.9;
-  double k_r = 4, k_s = 0, k_n = 0.5;
-  int n_eps = 6;
+  // Yu & Turk's constants: one declaration, anisotropy::Params (spec §8).
+  double k_r = anisotropy::Params<double>{}.k_r, k_s = anisotropy::Params<double>{}.k_s, k_n = anisotropy::Params<double>{}.k_n;
+  int n_eps = anisotropy::Params<double>{}.n_eps;
   double iso = 0.5;
   double half_band = 3;
   double close = 0.5;

@@ -4,7 +4,7 @@
 ///
 /// @code
 /// rime::surface::ParticleSet ice = rime::surface::SelectPhase(frame, rime::io::Phase::kIce, options);
-/// rime::surface::Settings settings;            // defaults of spec §10 / §12
+/// rime::surface::Settings settings = rime::surface::FromScene(scene.surface, scene.surface.ice_field);
 /// rime::surface::Result result = rime::surface::Reconstruct(ice, settings);
 /// rime::surface::WriteVdb("ice.0001.vdb", result);   // atomic
 /// rime::io::WriteMesh("ice.0001.obj", result.mesh);
@@ -37,27 +37,36 @@ using Field = io::SurfaceField;
 Field ParseField(const std::string& name);  // "ellipsoids" | "kernel_sum" | "isotropic"
 const char* FieldName(Field field);
 
+/// The scene's `[surface]` defaults: the one declaration of the values below (io::SurfaceSettings).
+const io::SurfaceSettings& SceneDefaults();
+
+/// What Reconstruct does. The physical parameters default to the scene's; the level-set filters,
+/// the extra grids and the mesh velocities default to off, so Settings{} is the plain field.
 struct Settings {
   Field field = Field::kEllipsoids;
-  double voxel_size = 0;                  // m; 0 = voxel_ratio * spacing
-  double voxel_ratio = 0.5;               // voxel size / d_p when voxel_size = 0
-  int resolution = 0;                     // > 0: the paper's fixed grid, voxel = longest padded extent / (resolution − 1)
-  double r_iso = 0.75;                    // ellipsoid level, in units of d_p (spec §10 default 0.75 d_p)
-  double lambda = 0.9;                    // Yu & Turk centre smoothing over same-phase neighbours (0 = off)
-  anisotropy::Params<double> anisotropy;  // k_s, k_r, k_n, N_ε, s_min, s_max (spec §8)
-  bool recompute_anisotropy = false;      // ice: PCA over ice neighbours instead of the stored D
-  double iso = 0.5;                       // kernel_sum: surface where Σ V W_A = iso
-  double half_band = 3;                   // narrow band half width, voxels (>= 3)
-  double close_radius = 0;                // d_p: morphological closing (dilate, then erode) that fills gaps narrower than twice this
-  int smooth_iterations = 0;              // OpenVDB LevelSetFilter mean-curvature iterations after the closing (not for kKernelSum)
-  bool velocity_grid = false;             // also build a `vel` vec3 grid
-  bool density_grid = false;              // also build a `density` fog grid
-  bool mesh = true;                       // extract the triangle mesh
-  bool mesh_velocities = false;           // per-vertex velocity interpolated from particles (PLY)
-  bool keep_voids = false;                // keep enclosed voids (gaps between ellipsoids) in the level set and mesh
-  bool deep_interior_tiles = true;        // ellipsoids/isotropic, no keep_voids, half_band <= 4: leaves deep inside
-                                          // a body become interior tiles without evaluating the field (same result)
+  double voxel_size = SceneDefaults().voxel_size;    // m; 0 = voxel_ratio * spacing
+  double voxel_ratio = SceneDefaults().voxel_ratio;  // voxel size / d_p when voxel_size = 0
+  int resolution = SceneDefaults().resolution;       // > 0: the paper's fixed grid, voxel = longest padded extent / (resolution − 1)
+  double r_iso = SceneDefaults().r_iso;              // ellipsoid level, in units of d_p (spec §10)
+  double lambda = SceneDefaults().lambda;            // Yu & Turk centre smoothing over same-phase neighbours (0 = off)
+  anisotropy::Params<double> anisotropy;             // k_s, k_r, k_n, N_ε, s_min, s_max (spec §8)
+  bool recompute_anisotropy = false;                 // ice: PCA over ice neighbours instead of the stored D
+  double iso = SceneDefaults().iso;                  // kernel_sum: surface where Σ V W_A = iso
+  double half_band = SceneDefaults().half_band;      // narrow band half width, voxels (>= 3)
+  double close_radius = 0;          // d_p: morphological closing (dilate, then erode) that fills gaps narrower than twice this
+  int smooth_iterations = 0;        // OpenVDB LevelSetFilter mean-curvature iterations after the closing (not for kKernelSum)
+  bool velocity_grid = false;       // also build a `vel` vec3 grid
+  bool density_grid = false;        // also build a `density` fog grid
+  bool mesh = true;                 // extract the triangle mesh
+  bool mesh_velocities = false;     // per-vertex velocity interpolated from particles (PLY)
+  bool keep_voids = false;          // keep enclosed voids (gaps between ellipsoids) in the level set and mesh
+  bool deep_interior_tiles = true;  // ellipsoids/isotropic, no keep_voids, half_band <= 4: leaves deep inside
+                                    // a body become interior tiles without evaluating the field (same result)
 };
+
+/// The settings a scene's `[surface]` table asks for, for `field`: what rime-surface runs (with
+/// filters, and the grids and mesh its `formats` need).
+Settings FromScene(const io::SurfaceSettings& scene, Field field);
 
 /// One phase of one frame, ready for reconstruction.
 struct ParticleSet {
