@@ -191,13 +191,14 @@ void WritePreviewFiles(const SceneDocument& doc, const BakeLayout& layout) {
                         {"up_axis", std::string(io::EnumName(s.transform.up_axis))}}}});
   }
   const BakeSettings& b = doc.bake();
-  const json setup = {{"solids", solids},
-                      {"bounds", SceneBounds(scene)},
-                      {"width", b.preview_width},
-                      {"height", b.preview_height},
-                      {"engine", std::string(io::EnumName(b.preview_engine))},
-                      {"samples", b.preview_samples},
-                      {"view", ToArray(b.preview_view)}};
+  const json setup = {
+      {"solids", solids},
+      {"bounds", b.FramesABox() ? json{{"min", ToArray(b.preview_frame_min)}, {"max", ToArray(b.preview_frame_max)}} : SceneBounds(scene)},
+      {"width", b.preview_width},
+      {"height", b.preview_height},
+      {"engine", std::string(io::EnumName(b.preview_engine))},
+      {"samples", b.preview_samples},
+      {"view", ToArray(b.preview_view)}};
   const fs::path folder = layout.cache() / "preview";
   fs::create_directories(folder);
   WriteIfChanged(folder / "render_preview.py", std::string(kRenderScript).substr(1));

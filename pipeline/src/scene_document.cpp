@@ -17,6 +17,9 @@ BakeSettings ParseBakeTable(io::TomlReader t) {
   BakeSettings b;
   io::LoadSettings(t, b);
   if (!(Norm(b.preview_view) > 0)) t.Fail("preview_view", "must not be the zero vector");
+  if (b.FramesABox())
+    for (int a = 0; a < 3; ++a)
+      if (!(b.preview_frame_max[a] > b.preview_frame_min[a])) t.Fail("preview_frame_max", "must be above preview_frame_min on every axis");
   t.RejectUnknownKeys();
   return b;
 }

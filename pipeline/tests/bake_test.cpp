@@ -391,6 +391,13 @@ TEST_F(Bake, PreviewRendersEveryCleanedFrameWhenBlenderIsOnPath) {
   ASSERT_EQ(RunBake(), 0) << output_;
   EXPECT_EQ(Invocations()["blender"], kLastFrame + 1) << output_;
   EXPECT_NE(ReadFile(Out() / "cache/preview/preview_scene.json").find("0.25"), std::string::npos);
+  // A close-up box replaces the domain as what the camera frames.
+  WriteFile(scene_, ReadFile(scene_) + "preview_frame_min = [0.125, -0.5, 0.0]\npreview_frame_max = [0.375, 0.5, 0.625]\n");
+  ASSERT_EQ(RunBake(), 0) << output_;
+  EXPECT_EQ(Invocations()["blender"], kLastFrame + 1) << output_;
+  const std::string setup = ReadFile(Out() / "cache/preview/preview_scene.json");
+  EXPECT_NE(setup.find("0.125"), std::string::npos) << setup;
+  EXPECT_NE(setup.find("0.625"), std::string::npos) << setup;
 }
 
 // RIME_BLENDER names a Blender outside PATH; "none" skips the preview stage.
@@ -688,6 +695,12 @@ TEST_F(Bake, BadBakeTableNamesFileLineAndField) {
   const auto line = std::count(text.begin(), text.end(), '\n');  // the misspelled key is on the last line
   EXPECT_EQ(RunBake(), 3) << output_;
   EXPECT_NE(output_.find(fmt::format("scene.toml:{}: bake.preview_widht", line)), std::string::npos) << output_;
+}
+
+TEST_F(Bake, EmptyPreviewFrameBoxIsRefusedNamingTheField) {
+  WriteFile(scene_, ReadFile(scene_) + "[bake]\npreview_frame_min = [0, 0, 0]\npreview_frame_max = [1, 1, 0]\n");
+  EXPECT_EQ(RunBake(), 3) << output_;
+  EXPECT_NE(output_.find("bake.preview_frame_max"), std::string::npos) << output_;
 }
 
 TEST_F(Bake, ZeroPreviewViewIsRefusedNamingTheField) {

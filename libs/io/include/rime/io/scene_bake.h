@@ -23,6 +23,9 @@ struct BakeSettings {
   int preview_samples = 16;
   int contact_sheet_columns = 4;
   Vec3d preview_view{1.0, -1.4, 0.8};
+  // Both zero: the camera frames the whole [domain] (or the water and solids without one).
+  Vec3d preview_frame_min{0, 0, 0}, preview_frame_max{0, 0, 0};
+  bool FramesABox() const { return !(preview_frame_min == Vec3d{0, 0, 0} && preview_frame_max == Vec3d{0, 0, 0}); }
 
   template <class Self, class F>
   static void Visit(Self& s, F&& f) {
@@ -35,9 +38,20 @@ struct BakeSettings {
       s.contact_sheet_columns);
     f(Param{.name = "preview_view",
             .range = Range::Closed(-1e6, 1e6),
-            .help = "direction from the scene's centre to the camera (z up), not the zero vector; the camera always frames the whole "
-                    "`[domain]`"},
+            .help = "direction from the centre of what the camera frames to the camera (z up), not the zero vector"},
       s.preview_view);
+    f(Param{.name = "preview_frame_min",
+            .unit = "m",
+            .range = Range::Closed(-1e6, 1e6),
+            .help = "lower corner of the box the preview camera frames, for a close-up (with `preview_frame_max`)",
+            .default_doc = "[0, 0, 0]: the whole `[domain]`"},
+      s.preview_frame_min);
+    f(Param{.name = "preview_frame_max",
+            .unit = "m",
+            .range = Range::Closed(-1e6, 1e6),
+            .help = "upper corner of that box, above `preview_frame_min` on every axis",
+            .default_doc = "[0, 0, 0]: the whole `[domain]`"},
+      s.preview_frame_max);
   }
 };
 
