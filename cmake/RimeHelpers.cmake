@@ -12,6 +12,11 @@ endfunction()
 # magnitude slower.
 set(RIME_TEST_TIMEOUT 900 CACHE STRING "CTest TIMEOUT of each GoogleTest case")
 
+# Every test's TMPDIR: one folder of the build tree, so that temporary files stay out of the
+# shared /tmp and a fixture can check that no test left any (tests/support/test_tmpdir.cmake).
+set(RIME_TEST_TMPDIR ${PROJECT_BINARY_DIR}/test-tmp)
+set(RIME_TEST_TMPDIR_PROPERTIES ENVIRONMENT_MODIFICATION TMPDIR=set:${RIME_TEST_TMPDIR} FIXTURES_REQUIRED rime_test_tmpdir)
+
 # Every test carries exactly one of these labels: `unit` (fast and self-contained: the inner loop,
 # `ctest -L unit`), `slow` (long simulations, real multi-stage bakes, a local cluster) or
 # `validation` (figures against analytic or measured references). docs/testing.md describes them.
@@ -43,7 +48,8 @@ function(rime_add_test name)
     RIME_SHARED_DIR="${PROJECT_SOURCE_DIR}/../shared"
     RIME_BINARY_DIR="${PROJECT_BINARY_DIR}")
   rime_target_defaults(${name})
-  gtest_discover_tests(${name} DISCOVERY_TIMEOUT 60 TEST_LIST ${name}_TESTS PROPERTIES TIMEOUT ${RIME_TEST_TIMEOUT} ${ARG_PROPERTIES})
+  gtest_discover_tests(${name} DISCOVERY_TIMEOUT 60 TEST_LIST ${name}_TESTS
+                       PROPERTIES TIMEOUT ${RIME_TEST_TIMEOUT} ${RIME_TEST_TMPDIR_PROPERTIES} ${ARG_PROPERTIES})
   # gtest_discover_tests flattens list-valued properties; set the labels once the tests are known.
   # CTest appends labels, so each test is labelled once. CTest reads this file without policies
   # (no if(IN_LIST)); the list is undefined when the executable was not built. A SLOW name that no
@@ -79,7 +85,7 @@ function(rime_add_program_test name)
   endif()
   set(labels ${ARG_KIND} ${ARG_LABELS})
   add_test(NAME ${name} COMMAND ${ARG_COMMAND})
-  set_tests_properties(${name} PROPERTIES TIMEOUT ${ARG_TIMEOUT} LABELS "${labels}")
+  set_tests_properties(${name} PROPERTIES TIMEOUT ${ARG_TIMEOUT} LABELS "${labels}" ${RIME_TEST_TMPDIR_PROPERTIES})
 endfunction()
 
 # rime_add_benchmark(STAGE SOURCES ... LIBS ...): the benchmark program rime-bench-<STAGE>, built

@@ -21,6 +21,7 @@
 
 #include "rime/test/bake_outputs.h"
 #include "rime/test/fake_tools.h"
+#include "rime/test/temp_folder.h"
 #include "farm.h"
 #include "rime/core/error.h"
 #include "rime/io/scene.h"
@@ -41,8 +42,7 @@ class Bake : public ::testing::Test {
  protected:
   void SetUp() override {
     const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-    root_ = fs::temp_directory_path() / (std::string("rime_bake_test_") + info->name() + "_" + std::to_string(getpid()));
-    fs::remove_all(root_);
+    root_ = temp_ / info->name();  // a folder of its own, so that a test can make siblings outside it
     fs::create_directories(root_);
     test::WriteFakeTools(root_ / "tools");
     scene_ = root_ / "scene.toml";
@@ -56,7 +56,6 @@ class Bake : public ::testing::Test {
   }
   void TearDown() override {
     if (!saved_path_.empty()) setenv("PATH", saved_path_.c_str(), 1);
-    if (!HasFailure()) fs::remove_all(root_);
   }
   /// Puts a fake blender and ffmpeg first on PATH (until TearDown) and lets rime-bake use them.
   void UseFakePreviewTools() {
@@ -109,6 +108,7 @@ class Bake : public ::testing::Test {
   /// Moves a file's mtime forward without changing its content (like `touch`).
   static void Touch(const fs::path& p) { fs::last_write_time(p, fs::last_write_time(p) + std::chrono::seconds(5)); }
 
+  rime::test::TempFolder temp_{"bake_test"};
   fs::path root_, scene_;
   std::string output_, saved_path_;
 };

@@ -21,6 +21,7 @@
 #include "rime/io/scene.h"
 #include "rime/test/files.h"
 #include "rime/test/small_bake_scene.h"
+#include "rime/test/temp_folder.h"
 
 namespace fs = std::filesystem;
 extern char** environ;
@@ -36,16 +37,13 @@ using test::ReadFile;
 class BakeEndToEnd : public ::testing::Test {
  protected:
   void SetUp() override {
-    root_ = fs::temp_directory_path() /
-            fmt::format("rime_e2e_{}_{}", ::testing::UnitTest::GetInstance()->current_test_info()->name(), getpid());
-    fs::remove_all(root_);
-    fs::create_directories(root_);
+    temp_ =
+        std::make_unique<rime::test::TempFolder>(fmt::format("e2e_{}", ::testing::UnitTest::GetInstance()->current_test_info()->name()));
+    root_ = temp_->path();
     std::ofstream(root_ / "e2e.toml") << kScene;
     setenv("RIME_BLENDER", "none", 1);  // these tests check the stage tools; previews are Blender's work
   }
-  void TearDown() override {
-    if (!HasFailure()) fs::remove_all(root_);
-  }
+  void TearDown() override { temp_.reset(); }
 
   static std::vector<std::string> Args(const fs::path& out, const std::string& extra_flags) {
     std::vector<std::string> args = {
@@ -73,6 +71,7 @@ class BakeEndToEnd : public ::testing::Test {
   }
   static fs::path Baked() { return root_ / "out_a"; }
 
+  static inline std::unique_ptr<rime::test::TempFolder> temp_;
   static inline fs::path root_;
   static inline std::string output_;
   static inline nlohmann::json summary_;

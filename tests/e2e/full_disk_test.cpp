@@ -12,6 +12,7 @@
 
 #include "rime/test/bake_outputs.h"
 #include "rime/test/small_bake_scene.h"
+#include "rime/test/temp_folder.h"
 
 namespace fs = std::filesystem;
 
@@ -32,17 +33,14 @@ std::vector<std::string> ErrorLines(const std::string& output) {
 class FullDisk : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
-    root_ = fs::temp_directory_path() / fmt::format("rime_full_disk_{}", getpid());
-    fs::remove_all(root_);
-    fs::create_directories(root_);
+    temp_ = std::make_unique<rime::test::TempFolder>("full_disk");
+    root_ = temp_->path();
     std::ofstream(root_ / "disk.toml") << test::SmallBakeScene("disk", kLastFrame);
     std::string output;
     ASSERT_EQ(test::Run(Args(root_ / "reference", RIME_BINARY_DIR "/bin"), root_ / "reference.txt", output), 0) << output;
     reference_ = test::Outputs(root_ / "reference");
   }
-  static void TearDownTestSuite() {
-    if (::testing::UnitTest::GetInstance()->failed_test_count() == 0) fs::remove_all(root_);
-  }
+  static void TearDownTestSuite() { temp_.reset(); }
   static constexpr std::pair<const char*, const char*> kStages[] = {
       {"boundary", "rime-boundary"}, {"sim", "rime-sim"}, {"surface", "rime-surface"}, {"clean", "rime-clean"}};
   // Each stage tool behind a wrapper that applies RIME_TEST_FSIZE_<stage> (KiB) when set; the
@@ -64,6 +62,7 @@ class FullDisk : public ::testing::Test {
   static void ExpectNothingDamaged(const fs::path& out, const std::string& when) {
     for (const std::string& problem : test::PartialFiles(out, reference_)) ADD_FAILURE() << when << ": " << problem;
   }
+  static inline std::unique_ptr<rime::test::TempFolder> temp_;
   static inline fs::path root_;
   static inline std::map<std::string, std::string> reference_;
 };

@@ -10,6 +10,7 @@
 #include "rime/test/bake_outputs.h"
 #include "rime/io/particles.h"
 #include "rime/test/small_bake_scene.h"
+#include "rime/test/temp_folder.h"
 
 namespace fs = std::filesystem;
 
@@ -38,16 +39,10 @@ std::string SceneNamed(const std::string& scene_name, const std::string& ball_na
 class HostileNames : public ::testing::Test {
  protected:
   void SetUp() override {
-    root_ = fs::temp_directory_path() / fmt::format("rime_hostile_{}", getpid());
-    fs::remove_all(root_);
-    fs::create_directories(root_);
     previous_folder_ = fs::current_path();
     fs::current_path(root_);
   }
-  void TearDown() override {
-    fs::current_path(previous_folder_);
-    if (!HasFailure()) fs::remove_all(root_);
-  }
+  void TearDown() override { fs::current_path(previous_folder_); }
   // Every shell metacharacter, quotes of both kinds, a newline and non-ASCII letters, and no '/'
   // (names with one are refused); each command would create a marker file in the working folder,
   // root_, if anything ran it through a shell.
@@ -56,7 +51,8 @@ class HostileNames : public ::testing::Test {
     for (int k = 1; k <= 3; ++k) EXPECT_FALSE(fs::exists(root_ / fmt::format("p{}", k))) << "an injected command ran";
     EXPECT_FALSE(fs::exists("/tmp/pwned"));
   }
-  fs::path root_, previous_folder_;
+  rime::test::TempFolder temp_{"hostile"};
+  fs::path root_ = temp_.path(), previous_folder_;
 };
 
 TEST_F(HostileNames, BakeWorksUnderTheLiteralNamesAndRunsNothingInjected) {

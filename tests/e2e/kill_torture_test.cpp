@@ -17,6 +17,7 @@
 #include "rime/test/bake_outputs.h"
 #include "rime/io/particles.h"
 #include "rime/test/small_bake_scene.h"
+#include "rime/test/temp_folder.h"
 
 namespace fs = std::filesystem;
 using Clock = std::chrono::steady_clock;
@@ -65,9 +66,8 @@ ino_t Inode(const fs::path& file) {
 class KillTorture : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
-    root_ = fs::temp_directory_path() / fmt::format("rime_torture_{}", getpid());
-    fs::remove_all(root_);
-    fs::create_directories(root_);
+    temp_ = std::make_unique<rime::test::TempFolder>("torture");
+    root_ = temp_->path();
     std::ofstream(root_ / "torture.toml") << kScene;
     // The uninterrupted reference, with the moments at which its final files appeared.
     const auto start = Clock::now();
@@ -84,9 +84,7 @@ class KillTorture : public ::testing::Test {
     ASSERT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << test::ReadFile(root_ / "reference.txt");
     reference_ = test::Outputs(Reference());
   }
-  static void TearDownTestSuite() {
-    if (::testing::UnitTest::GetInstance()->failed_test_count() == 0) fs::remove_all(root_);
-  }
+  static void TearDownTestSuite() { temp_.reset(); }
 
   static fs::path Reference() { return root_ / "reference"; }
   static std::vector<std::string> Args(const fs::path& out) {
@@ -104,6 +102,7 @@ class KillTorture : public ::testing::Test {
       while (Alive(tool) && Clock::now() < deadline) Sleep(0.02);
   }
 
+  static inline std::unique_ptr<rime::test::TempFolder> temp_;
   static inline fs::path root_;
   static inline std::vector<double> appeared_;
   static inline double reference_seconds_ = 0;

@@ -22,6 +22,7 @@
 #include "rime/test/fake_tools.h"
 #include "rime/test/local_slurm.h"
 #include "rime/test/small_bake_scene.h"
+#include "rime/test/temp_folder.h"
 
 namespace fs = std::filesystem;
 using nlohmann::json;
@@ -43,20 +44,19 @@ class Farm : public ::testing::Test {
  protected:
   static inline test::LocalSlurm* cluster_ = nullptr;
   static inline std::string cluster_problem_;
+  static inline std::unique_ptr<rime::test::TempFolder> cluster_folder_;
 
   static void TearDownTestSuite() {
     delete cluster_;
     cluster_ = nullptr;
-    // The cluster's logs are kept for a failed run only.
-    if (::testing::UnitTest::GetInstance()->failed_test_count() == 0) fs::remove_all(ClusterFolder());
+    cluster_folder_.reset();  // after the daemons have stopped writing into it
   }
-  static fs::path ClusterFolder() { return fs::temp_directory_path() / fmt::format("rime_farm_slurm_{}", getpid()); }
+  static fs::path ClusterFolder() {
+    if (!cluster_folder_) cluster_folder_ = std::make_unique<rime::test::TempFolder>("farm_slurm");
+    return cluster_folder_->path();
+  }
 
   void SetUp() override {
-    root_ = fs::temp_directory_path() /
-            fmt::format("rime_farm_{}_{}", ::testing::UnitTest::GetInstance()->current_test_info()->name(), getpid());
-    fs::remove_all(root_);
-    fs::create_directories(root_);
     test::WriteFakeTools(root_ / "tools");
     std::ofstream(root_ / "real.toml") << kRealScene;
     std::ofstream(root_ / "fake.toml") << kFakeScene;
@@ -70,9 +70,6 @@ class Farm : public ::testing::Test {
     unsetenv("FAKE_FAIL");
     unsetenv("FAKE_SIM_SLEEP");
     unsetenv("RIME_FARM_CONFIG");
-  }
-  void TearDown() override {
-    if (!HasFailure()) fs::remove_all(root_);
   }
 
   /// Starts the cluster once for the whole suite; the caller skips when Slurm is not installed.
@@ -144,7 +141,8 @@ class Farm : public ::testing::Test {
     return nullptr;
   }
 
-  fs::path root_;
+  rime::test::TempFolder temp_{"farm"};
+  fs::path root_ = temp_.path();
   std::string output_;
   json summary_;
 };

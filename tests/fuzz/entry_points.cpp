@@ -2,6 +2,7 @@
 
 #include <unistd.h>
 
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -14,23 +15,23 @@
 #include "rime/io/mesh.h"
 #include "rime/io/particles.h"
 #include "rime/io/scene.h"
+#include "rime/test/temp_folder.h"
 
 namespace fs = std::filesystem;
 
 namespace rime::fuzz {
 namespace {
 
-// The readers take paths, so every input goes through a file in a folder of this process
-// (in memory under /dev/shm where it exists).
+// The readers take paths, so every input goes through a file in a folder of this process, removed
+// when it exits: in memory under /dev/shm where it exists, unless TMPDIR names a folder (CTest's
+// for the tests, where the suite checks that nothing is left).
 const fs::path& Folder() {
-  static const fs::path folder = [] {
+  static const rime::test::TempFolder folder("fuzz", [] {
     std::error_code ec;
-    const fs::path base = fs::is_directory("/dev/shm", ec) ? fs::path("/dev/shm") : fs::temp_directory_path();
-    fs::path f = base / ("rime-fuzz-" + std::to_string(::getpid()));
-    fs::create_directories(f);
-    return f;
-  }();
-  return folder;
+    const bool tmpdir_set = std::getenv("TMPDIR") != nullptr;
+    return !tmpdir_set && fs::is_directory("/dev/shm", ec) ? fs::path("/dev/shm") : fs::temp_directory_path();
+  }());
+  return folder.path();
 }
 
 fs::path WriteInput(std::string_view bytes, const std::string& name) {

@@ -11,6 +11,7 @@
 #include <regex>
 #include <set>
 #include <sstream>
+#include <variant>
 
 #include "rime/core/error.h"
 #include "rime/core/log.h"
@@ -119,8 +120,18 @@ struct FrameReport {
   std::vector<std::string> files;
 };
 
+// Bytes of a frame's datasets in memory: every row, boundary included, stays read while the frame
+// is surfaced.
+double FrameBytes(const io::ParticleFrame& frame) {
+  double bytes = 0;
+  for (const auto& [name, data] : frame.attributes)
+    bytes += std::visit([](const auto& values) { return double(values.size() * sizeof(values[0])); }, data);
+  return bytes;
+}
+
 // Refuses, before any output exists, when the frames that run side by side would need more memory
-// than the budget: each frame's estimate comes from the grid leaves its particles touch.
+// than the budget: each frame's estimate comes from the grid leaves its particles touch, plus the
+// frame itself.
 void CheckMemory(const std::vector<FrameFile>& frames, const std::vector<PhaseJob>& jobs, const surface::Settings& settings,
                  const surface::SelectOptions& select, const MemoryBudget& budget) {
   std::vector<double> estimates(frames.size());
@@ -128,13 +139,14 @@ void CheckMemory(const std::vector<FrameFile>& frames, const std::vector<PhaseJo
   std::vector<double> voxel_sizes(frames.size());
   tbb::parallel_for(std::size_t(0), frames.size(), [&](std::size_t k) {
     const io::ParticleFrame frame = io::ReadParticleFrame(frames[k].path, "particles");
+    const double frame_bytes = FrameBytes(frame);
     for (const PhaseJob& job : jobs) {
       std::vector<std::string> ignored;  // SelectPhase warns again when the frame is surfaced
       const surface::ParticleSet particles = surface::SelectPhase(frame, job.phase, select, ignored);
       surface::Settings s = settings;
       s.field = job.field;
       std::uint64_t v = 0;
-      const double bytes = double(surface::EstimateMemoryBytes(particles, s, &v));
+      const double bytes = frame_bytes + double(surface::EstimateMemoryBytes(particles, s, &v));
       // Phases of a frame are surfaced one after the other: the larger one sets the peak.
       if (bytes > estimates[k]) {
         estimates[k] = bytes;

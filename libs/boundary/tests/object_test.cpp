@@ -16,19 +16,13 @@
 #include "rime/core/error.h"
 #include "rime/io/mesh.h"
 #include "rime/test/files.h"
+#include "rime/test/temp_folder.h"
 #include "test_helpers.h"
 
 namespace rime::boundary {
 namespace {
 
 namespace fs = std::filesystem;
-
-fs::path TempDir(const std::string& name) {
-  const fs::path dir = fs::temp_directory_path() / ("rime_boundary_test_" + name + "_" + std::to_string(::getpid()));
-  fs::remove_all(dir);
-  fs::create_directories(dir);
-  return dir;
-}
 
 io::SolidObject MeshObject(const fs::path& file) {
   io::SolidObject o;
@@ -55,7 +49,7 @@ TEST(BoundaryObject, ProceduralBoxWritesAReadableBoundaryFile) {
   EXPECT_GT(object.mean_spacing, 0.5 * 0.01);
   EXPECT_LE(object.mean_spacing, 0.01 * 1.0001);
 
-  const fs::path dir = TempDir("box");
+  const rime::test::TempFolder dir("boundary_box");
   const fs::path file = dir / "tank.h5part";
   WriteBoundaryFile(file, object, "abc");
   const io::ParticleFrame frame = io::ReadParticleFrame(file, "boundary");
@@ -80,11 +74,10 @@ TEST(BoundaryObject, ProceduralBoxWritesAReadableBoundaryFile) {
   const auto normals = frame.GetVec3<float>("normal");
   EXPECT_NEAR(Norm(normals[7]), 1.0f, 1e-5f);
   EXPECT_EQ(frame.Get<std::int64_t>("id").back(), std::int64_t(frame.size() - 1));
-  fs::remove_all(dir);
 }
 
 TEST(BoundaryObject, MeshFileFormatsThroughAssimp) {
-  const fs::path dir = TempDir("formats");
+  const rime::test::TempFolder dir("boundary_formats");
   // One cube written as OBJ (quads), ASCII STL (triangle soup) and PLY; all give the same particles.
   test::WriteFile(dir / "cube.obj",
                   "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nv 0 0 1\nv 1 0 1\nv 0 1 1\nv 1 1 1\n"
@@ -123,11 +116,10 @@ TEST(BoundaryObject, MeshFileFormatsThroughAssimp) {
     EXPECT_EQ(o.size(), expected);
     EXPECT_EQ(o.mesh_hash.size(), 16u);
   }
-  fs::remove_all(dir);
 }
 
 TEST(BoundaryObject, MultiMeshFilesMergeUnlessAskedOtherwise) {
-  const fs::path dir = TempDir("parts");
+  const rime::test::TempFolder dir("boundary_parts");
   // Two named objects with the same triangle, 1 mm apart: merged, the copy is removed as a
   // near-duplicate; kept apart, both layers stay.
   test::WriteFile(dir / "two.obj", "o a\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\no b\nv 0 0 0.001\nv 1 0 0.001\nv 0 1 0.001\nf 4 5 6\n");
@@ -142,7 +134,6 @@ TEST(BoundaryObject, MultiMeshFilesMergeUnlessAskedOtherwise) {
   EXPECT_EQ(separate.size(), 2 * merged.size());
   EXPECT_EQ(merged.stats.near_duplicates_removed, merged.size());
   EXPECT_EQ(separate.stats.near_duplicates_removed, 0u);
-  fs::remove_all(dir);
 }
 
 void ExpectBadFile(const fs::path& file, const std::string& fragment, double spacing = 0.02, std::uint64_t max_particles = 50'000'000) {
@@ -160,7 +151,7 @@ void ExpectBadFile(const fs::path& file, const std::string& fragment, double spa
 }
 
 TEST(BoundaryObject, BadInputFiles) {
-  const fs::path dir = TempDir("bad");
+  const rime::test::TempFolder dir("boundary_bad");
   const std::string cube = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n";
   test::WriteFile(dir / "good.obj", cube);
   ExpectBadFile(dir / "missing.obj", "not found");
@@ -178,7 +169,6 @@ TEST(BoundaryObject, BadInputFiles) {
   ExpectBadFile(dir / "good.obj", "spacing", -0.1);
   ExpectBadFile(dir / "good.obj", "more than the maximum", 1e-5);
   ExpectBadFile(dir / "good.obj", "more than the maximum", 0.02, 1000);
-  fs::remove_all(dir);
 }
 
 // The shared test meshes sample without error at spacings tied to their size; the counts go to

@@ -10,21 +10,15 @@
 #include "rime/core/error.h"
 #include "rime/core/hash.h"
 #include "rime/core/progress.h"
+#include "rime/test/temp_folder.h"
 
 namespace fs = std::filesystem;
 
 namespace rime {
 namespace {
 
-fs::path TempDir(const std::string& name) {
-  fs::path dir = fs::temp_directory_path() / ("rime_core_" + name + "_" + std::to_string(getpid()));
-  fs::remove_all(dir);
-  fs::create_directories(dir);
-  return dir;
-}
-
 TEST(AtomicFile, NoFinalFileWithoutCommit) {
-  const fs::path dir = TempDir("atomic");
+  const rime::test::TempFolder dir("core_atomic");
   {
     AtomicFile f(dir / "out.txt");
     std::ofstream(f.temp_path()) << "partial";
@@ -36,12 +30,11 @@ TEST(AtomicFile, NoFinalFileWithoutCommit) {
   std::string s;
   in >> s;
   EXPECT_EQ(s, "done");
-  fs::remove_all(dir);
 }
 
 // A process killed while writing never leaves a file under its final name.
 TEST(AtomicFile, KilledWriterLeavesNoFinalFile) {
-  const fs::path dir = TempDir("killed");
+  const rime::test::TempFolder dir("core_killed");
   const pid_t child = fork();
   ASSERT_GE(child, 0);
   if (child == 0) {
@@ -55,18 +48,16 @@ TEST(AtomicFile, KilledWriterLeavesNoFinalFile) {
   int status = 0;
   waitpid(child, &status, 0);
   EXPECT_FALSE(fs::exists(dir / "frame.dat"));
-  fs::remove_all(dir);
 }
 
 TEST(Hash, StableAndContentSensitive) {
   EXPECT_EQ(Hash64("abc"), Hash64("abc"));
   EXPECT_NE(Hash64("abc"), Hash64("abd"));
   EXPECT_EQ(HexHash(0xabcULL), "0000000000000abc");
-  const fs::path dir = TempDir("hash");
+  const rime::test::TempFolder dir("core_hash");
   WriteFileAtomically(dir / "a", "hello");
   EXPECT_EQ(HashFile(dir / "a"), Hash64("hello"));
   EXPECT_THROW(HashFile(dir / "missing"), Error);
-  fs::remove_all(dir);
 }
 
 TEST(Error, MessageNamesWhere) {

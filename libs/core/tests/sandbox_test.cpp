@@ -5,21 +5,22 @@
 
 #include <filesystem>
 
+#include "rime/test/temp_folder.h"
+
 namespace fs = std::filesystem;
 
 namespace rime {
 namespace {
 
 struct SandboxFolders : ::testing::Test {
-  fs::path base = fs::temp_directory_path() / ("rime_sandbox_" + std::to_string(getpid()));
+  rime::test::TempFolder temp{"sandbox"};
+  fs::path base = temp.path();
   fs::path root = base / "box";
   void SetUp() override {
-    fs::remove_all(base);
     fs::create_directories(root / "meshes");
     fs::create_directories(base / "box-other");
     fs::create_directories(base / "outside");
   }
-  void TearDown() override { fs::remove_all(base); }
 };
 
 TEST_F(SandboxFolders, AcceptsPathsInsideIncludingOnesNotYetWritten) {

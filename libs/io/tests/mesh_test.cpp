@@ -9,15 +9,16 @@
 #include "rime/core/error.h"
 #include "rime/io/mesh.h"
 #include "rime/test/files.h"
+#include "rime/test/temp_folder.h"
 
 namespace rime::io {
 namespace {
 namespace fs = std::filesystem;
 
-fs::path TempDir() {
-  const fs::path dir = fs::temp_directory_path() / ("rime_mesh_test_" + std::to_string(::getpid()));
-  fs::create_directories(dir);
-  return dir;
+/// One folder for the whole program, removed when it exits.
+const fs::path& TempDir() {
+  static const rime::test::TempFolder dir("mesh");
+  return dir.path();
 }
 
 /// Runs ReadMesh and returns the error text (fails the test if it succeeds) and the exit code.

@@ -10,6 +10,7 @@
 
 #include "rime/core/error.h"
 #include "rime/io/particles.h"
+#include "rime/test/temp_folder.h"
 
 namespace fs = std::filesystem;
 
@@ -18,14 +19,6 @@ namespace {
 
 class ParticleFiles : public ::testing::Test {
  protected:
-  void SetUp() override {
-    dir_ = fs::temp_directory_path() /
-           ("rime_io_" + std::to_string(getpid()) + "_" + ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
-  }
-  void TearDown() override { fs::remove_all(dir_); }
-
   static ParticleFrame Sample(std::size_t n) {
     std::mt19937 rng(11);
     std::uniform_real_distribution<float> u(-1, 1);
@@ -64,7 +57,8 @@ class ParticleFiles : public ::testing::Test {
     return f;
   }
 
-  fs::path dir_;
+  rime::test::TempFolder temp_{"io"};
+  fs::path dir_ = temp_.path();
 };
 
 TEST_F(ParticleFiles, RoundTripsEveryAttributeBitExactly) {

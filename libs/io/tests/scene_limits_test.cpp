@@ -9,6 +9,7 @@
 #include "rime/core/error.h"
 #include "rime/io/scene.h"
 #include "rime/io/toml_reader.h"
+#include "rime/test/temp_folder.h"
 
 namespace rime::io {
 namespace {
@@ -135,7 +136,8 @@ TEST(SceneLimits, AHundredMegabyteStringNamesItsField) {
 }
 
 TEST(SceneLimits, AFileOverTheSizeLimitIsRefusedWithoutReadingIt) {
-  const auto file = std::filesystem::temp_directory_path() / "rime_scene_limits_huge.toml";
+  const rime::test::TempFolder dir("scene_limits");
+  const auto file = dir / "huge.toml";
   {
     std::ofstream out(file, std::ios::binary);
     out << "[scene]\n";
@@ -147,7 +149,6 @@ TEST(SceneLimits, AFileOverTheSizeLimitIsRefusedWithoutReadingIt) {
   } catch (const Error& e) {
     EXPECT_TRUE(Has(std::string(e.what()), "larger than the limit"));
   }
-  std::filesystem::remove(file);
 }
 
 }  // namespace

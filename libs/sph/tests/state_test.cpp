@@ -13,6 +13,7 @@
 #include "rime/exec/device.h"
 #include "rime/sph/simulation.h"
 #include "rime/test/sph_scenes.h"
+#include "rime/test/temp_folder.h"
 
 namespace rime::sph {
 namespace {
@@ -73,10 +74,10 @@ void ExpectRows(const Group& group, const io::ParticleFrame& frame, std::size_t 
 // Writes a frame, reads it back and checks every dataset against the solver's arrays.
 void ExpectFrameIsTheState(const Simulation<float>& sim, const std::string& label) {
   SCOPED_TRACE(label);
-  const auto path = std::filesystem::temp_directory_path() / ("rime_state_test_" + std::to_string(::getpid()) + ".h5part");
+  const rime::test::TempFolder dir("state");
+  const auto path = dir / "frame.h5part";
   io::WriteParticleFrame(path, sim.Snapshot(1));
   const io::ParticleFrame frame = io::ReadParticleFrame(path, "particles");
-  std::filesystem::remove(path);
   const auto& s = sim.state();
   const std::size_t nf = std::size_t(sim.fluid_count()), nb = std::size_t(sim.boundary_count());
   ASSERT_EQ(frame.size(), nf + nb);

@@ -533,6 +533,28 @@ std::vector<float> ReachVoxels(const ParticleSet& particles, const Settings& s, 
   return reach;
 }
 
+// Planned leaves that lie inside the body: their 3×3×3 block of leaves holds at least 70 % of the
+// particles that water at rest (one per d_p³) would put there. A leaf that a flat surface crosses
+// sees at most 2/3 of that (its outer layer of neighbours is empty), a bulk leaf about all of it.
+// Those leaves become tiles when the level set is pruned and carry no mesh; enclosed voids in them
+// are filled before meshing (keep_voids off).
+std::size_t InteriorLeaves(const Plan& plan, double spacing) {
+  const double full_block = 27 * std::pow(kLeafDim * plan.dx / spacing, 3);
+  std::size_t interior = 0;
+  for (std::uint64_t key : plan.targets) {
+    std::int64_t lx, ly, lz;
+    KeyToLeaf(key, lx, ly, lz);
+    std::size_t count = 0;
+    for (int ox = -1; ox <= 1; ++ox)
+      for (int oy = -1; oy <= 1; ++oy)
+        for (int oz = -1; oz <= 1; ++oz)
+          if (const auto bin = plan.bin_of_key.find(LeafKey(lx + ox, ly + oy, lz + oz)); bin != plan.bin_of_key.end())
+            count += plan.bin_start[bin->second + 1] - plan.bin_start[bin->second];
+    interior += double(count) >= 0.7 * full_block;
+  }
+  return interior;
+}
+
 }  // namespace
 
 std::uint64_t EstimateMemoryBytes(const ParticleSet& particles, const Settings& settings, std::uint64_t* voxels) {
@@ -546,8 +568,7 @@ std::uint64_t EstimateMemoryBytes(const ParticleSet& particles, const Settings& 
                                                float(settings.half_band), float(h / dx));
   const Plan plan = MakePlan(particles.positions, reach, dx);
   if (voxels) *voxels = plan.targets.size() * 512;
-  // Per leaf: float values + masks (surface, inside, erosion copies) + node overhead; the mesh is
-  // bounded by the surface leaves (about 2 triangles and one vertex per surface voxel).
+  // Per leaf: float values + masks (surface, inside, erosion copies) + node overhead.
   const double leaf_bytes = 512 * 4 + 64 * (4 + std::ceil(settings.half_band)) + 96 + (settings.velocity_grid ? 512 * 12 : 0) +
                             (settings.density_grid ? 512 * 4 : 0);
   const double particle_bytes = 24 + 12 + 24 + 12 + 8 + 3 + 32 + 16;  // input, centres, D, velocity, stretches, grid, plan
@@ -564,11 +585,19 @@ std::uint64_t EstimateMemoryBytes(const ParticleSet& particles, const Settings& 
     v->erase(std::unique(v->begin(), v->end()), v->end());
   }
   const double node_bytes = upper1.size() * 4096 * 12.0 + upper2.size() * 32768 * 12.0;
+  // The field is evaluated in every planned leaf; the masks and the particle-side arrays are freed
+  // and the interior pruned to tiles before the mesh is built, which needs only the leaves near the
+  // surface: the two phases peak one after the other.
+  const double all_leaves = double(plan.targets.size());
+  const double surface_leaves = all_leaves - double(InteriorLeaves(plan, particles.spacing));
   // The mesh and OpenVDB's meshing buffers: 26 (jittered ball) to 146 (two-layer sheet) triangles
-  // per leaf; 6 kB per leaf keeps the estimate above the measured peak at 0.5–2M particles
-  // (docs/reliability.md, memory budgets). The process's fixed ~30 MB is not counted.
-  const double mesh_bytes = settings.mesh ? plan.targets.size() * 6000.0 : 0.0;
-  return std::uint64_t(plan.targets.size() * leaf_bytes * 1.5 + node_bytes * 2 + n * particle_bytes + mesh_bytes);
+  // per leaf; 6 kB per surface leaf keeps the estimate above the measured peak at 0.5–2M ice
+  // particles and for water at fine voxels (docs/reliability.md, memory budgets). The process's
+  // fixed ~30 MB is not counted.
+  const double mesh_bytes_per_leaf = settings.mesh ? 6000.0 : 0.0;
+  const double field_phase = all_leaves * leaf_bytes * 1.5;
+  const double mesh_phase = surface_leaves * (leaf_bytes * 1.5 + mesh_bytes_per_leaf);
+  return std::uint64_t(std::max(field_phase, mesh_phase) + node_bytes * 2 + n * particle_bytes);
 }
 
 Result Reconstruct(const ParticleSet& particles, const Settings& settings) {

@@ -6,6 +6,7 @@
 
 #include "rime/core/error.h"
 #include "rime/surface/frame_input.h"
+#include "rime/test/temp_folder.h"
 
 namespace rime::surface {
 namespace {
@@ -28,8 +29,7 @@ io::ParticleFrame MakeFrame(bool with_anisotropy) {
 }
 
 TEST(FrameInput, SelectsIceWithStoredAnisotropyFromAFile) {
-  const fs::path dir = fs::temp_directory_path() / ("rime_surface_frames_" + std::to_string(getpid()));
-  fs::create_directories(dir);
+  const rime::test::TempFolder dir("surface_frames");
   const fs::path path = io::FramePath(dir, "particles", 3, "h5part");
   io::WriteParticleFrame(path, MakeFrame(true));
   const io::ParticleFrame frame = io::ReadParticleFrame(path, "particles");
@@ -46,7 +46,6 @@ TEST(FrameInput, SelectsIceWithStoredAnisotropyFromAFile) {
   const ParticleSet water = SelectPhase(frame, io::Phase::kFluid, {}, warnings);
   ASSERT_EQ(water.size(), 1u);
   EXPECT_TRUE(water.stored_anisotropy.empty());
-  fs::remove_all(dir);
 }
 
 TEST(FrameInput, MissingAnisotropyWarnsOrFailsUnderStrict) {

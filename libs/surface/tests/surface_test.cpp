@@ -17,6 +17,7 @@
 #include "rime/core/union_find.h"
 #include "rime/surface/reconstruct.h"
 #include "../src/grids.h"
+#include "rime/test/temp_folder.h"
 
 namespace rime::surface {
 namespace {
@@ -401,15 +402,13 @@ TEST(Reconstruct, EmptyInputGivesAValidEmptyLevelSet) {
   none.spacing = kSpacing;
   const Result result = Reconstruct(none, Settings{});
   EXPECT_TRUE(result.mesh.empty());
-  const fs::path dir = fs::temp_directory_path() / ("rime_surface_empty_" + std::to_string(getpid()));
-  fs::create_directories(dir);
+  const rime::test::TempFolder dir("surface_empty");
   WriteVdb(dir / "ice.0001.vdb", result);
   const auto info = InspectVdb(dir / "ice.0001.vdb");
   ASSERT_EQ(info.size(), 1u);
   EXPECT_EQ(info[0].name, "surface");
   EXPECT_EQ(info[0].grid_class, "level set");
   EXPECT_EQ(info[0].active_voxels, 0u);
-  fs::remove_all(dir);
 }
 
 TEST(Reconstruct, VdbFileContract) {
@@ -423,8 +422,7 @@ TEST(Reconstruct, VdbFileContract) {
   ASSERT_FALSE(result.mesh.empty());
   ASSERT_EQ(result.mesh.velocities.size(), result.mesh.positions.size());
   EXPECT_NEAR(result.mesh.velocities[0].y, 2.0f, 1e-5f);
-  const fs::path dir = fs::temp_directory_path() / ("rime_surface_vdb_" + std::to_string(getpid()));
-  fs::create_directories(dir);
+  const rime::test::TempFolder dir("surface_vdb");
   const fs::path file = dir / "ice.0007.vdb";
   WriteVdb(file, result);
   const auto info = InspectVdb(file);
@@ -453,7 +451,6 @@ TEST(Reconstruct, VdbFileContract) {
     EXPECT_NE(text.find("class: level set"), std::string::npos) << text;
     EXPECT_NE(text.find("voxel size: 0.01"), std::string::npos) << text;
   }
-  fs::remove_all(dir);
 }
 
 TEST(Reconstruct, RejectsBadSettings) {

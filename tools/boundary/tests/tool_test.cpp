@@ -8,6 +8,7 @@
 
 #include "rime/io/particles.h"
 #include "rime/test/files.h"
+#include "rime/test/temp_folder.h"
 
 namespace {
 
@@ -22,13 +23,7 @@ struct Result {
 
 class RimeBoundaryTool : public ::testing::Test {
  protected:
-  void SetUp() override {
-    dir_ = fs::temp_directory_path() / ("rime_boundary_tool_" + std::to_string(::getpid()));
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
-    Write("tetra.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n");
-  }
-  void TearDown() override { fs::remove_all(dir_); }
+  void SetUp() override { Write("tetra.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n"); }
   void Write(const std::string& name, const std::string& text) { rime::test::WriteFile(dir_ / name, text); }
   Result Run(const std::string& args) {
     const fs::path err = dir_ / "stderr.txt";
@@ -48,7 +43,8 @@ class RimeBoundaryTool : public ::testing::Test {
     for (const auto& entry : fs::directory_iterator(dir_))
       EXPECT_EQ(entry.path().string().find(".tmp."), std::string::npos) << "temporary file left: " << entry.path();
   }
-  fs::path dir_;
+  rime::test::TempFolder temp_{"boundary_tool"};
+  fs::path dir_ = temp_.path();
 };
 
 TEST_F(RimeBoundaryTool, MeshToFileWithTransformAndSummary) {

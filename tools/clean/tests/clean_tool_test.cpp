@@ -14,6 +14,7 @@
 #include "rime/clean/procedural.h"
 #include "rime/clean/quality.h"
 #include "rime/test/files.h"
+#include "rime/test/temp_folder.h"
 
 namespace rime {
 namespace {
@@ -37,13 +38,9 @@ class CleanTool : public ::testing::Test {
  protected:
   void SetUp() override {
     if (!fs::exists(kTool)) GTEST_SKIP() << "rime-clean not built at " << kTool;
-    dir_ = fs::temp_directory_path() /
-           ("rime_clean_tool_" + std::to_string(::getpid()) + "_" + ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
   }
-  void TearDown() override { fs::remove_all(dir_); }
-  fs::path dir_;
+  rime::test::TempFolder temp_{"clean_tool"};
+  fs::path dir_ = temp_.path();
 };
 
 io::TriMesh NoisyBallWithSpeck() {

@@ -8,6 +8,7 @@
 
 #include "rime/io/particles.h"
 #include "rime/test/files.h"
+#include "rime/test/temp_folder.h"
 
 namespace fs = std::filesystem;
 
@@ -32,14 +33,6 @@ Result Exec(const std::string& command) {
 
 class SimTool : public ::testing::Test {
  protected:
-  void SetUp() override {
-    dir_ = fs::temp_directory_path() /
-           ("rime_sim_tool_" + std::to_string(getpid()) + "_" + ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
-  }
-  void TearDown() override { fs::remove_all(dir_); }
-
   fs::path WriteScene(const std::string& simulation_extra, double end_time = 0.2, double fps = 30) {
     const fs::path scene = dir_ / "scene.toml";
     std::ofstream(scene)
@@ -60,7 +53,8 @@ class SimTool : public ::testing::Test {
     return (kBin / "rime-sim").string() + " " + scene.string() + " --boundary " + (dir_ / "boundary").string() + " -o " +
            (dir_ / out).string() + " -q " + extra;
   }
-  fs::path dir_;
+  rime::test::TempFolder temp_{"sim_tool"};
+  fs::path dir_ = temp_.path();
 };
 
 TEST_F(SimTool, MissingBoundaryFileIsABadInput) {

@@ -13,6 +13,7 @@
 #include "rime/io/mesh.h"
 #include "rime/io/particles.h"
 #include "rime/test/files.h"
+#include "rime/test/temp_folder.h"
 
 namespace {
 
@@ -26,7 +27,8 @@ struct RunResult {
 
 RunResult Execute(const std::string& args) {
   // One log per process: ctest runs tests in parallel, and CI runs may overlap.
-  const fs::path log = fs::temp_directory_path() / ("rime_surface_cli_" + std::to_string(getpid()) + ".log");
+  static const rime::test::TempFolder logs("surface_cli_log");
+  const fs::path log = logs / "rime-surface.log";
   const int status = std::system((kTool + " " + args + " > " + log.string() + " 2>&1").c_str());
   return {WEXITSTATUS(status), rime::test::ReadFile(log)};
 }
@@ -61,13 +63,7 @@ rime::io::ParticleFrame MakeFrame(std::int64_t number, bool ice, bool anisotropy
 
 class Cli : public ::testing::Test {
  protected:
-  void SetUp() override {
-    dir_ = fs::temp_directory_path() / ("rime_surface_cli_" + std::to_string(getpid()) + "_" +
-                                        std::string(::testing::UnitTest::GetInstance()->current_test_info()->name()));
-    fs::remove_all(dir_);
-    fs::create_directories(dir_ / "sim");
-  }
-  void TearDown() override { fs::remove_all(dir_); }
+  void SetUp() override { fs::create_directories(dir_ / "sim"); }
   fs::path Frame(std::int64_t n) const { return rime::io::FramePath(dir_ / "sim", "particles", n, "h5part"); }
   std::string Sim() const { return (dir_ / "sim").string(); }
   std::string Out() const { return (dir_ / "out").string(); }
@@ -75,7 +71,8 @@ class Cli : public ::testing::Test {
     if (!fs::exists(dir_ / "out")) return 0;
     return std::size_t(std::distance(fs::directory_iterator(dir_ / "out"), fs::directory_iterator()));
   }
-  fs::path dir_;
+  rime::test::TempFolder temp_{"surface_cli"};
+  fs::path dir_ = temp_.path();
 };
 
 TEST_F(Cli, WritesEveryFormatForBothPhases) {
@@ -173,6 +170,54 @@ TEST_F(Cli, RefusesAboveTheMemoryBudgetBeforeWritingAnyFrame) {
   const RunResult fits = Execute(Sim() + " -o " + Out() + " -j 1 --phase ice --format obj");
   EXPECT_EQ(fits.code, 0) << fits.output;
   EXPECT_EQ(OutputFiles(), 2u);
+}
+
+// Bytes from "needs about 12.3 MiB" (rime/core/memory_budget.h FormatBytes); 0 when absent.
+double NeededBytes(const std::string& refusal) {
+  const auto at = refusal.find("needs about ");
+  if (at == std::string::npos) return 0;
+  std::istringstream in(refusal.substr(at + 12));
+  double value = 0;
+  std::string unit;
+  in >> value >> unit;
+  const std::vector<std::string> units = {"B", "KiB", "MiB", "GiB", "TiB"};
+  const auto u = std::find(units.begin(), units.end(), unit);
+  return u == units.end() ? 0 : value * std::pow(1024.0, double(u - units.begin()));
+}
+
+// The estimate must stay above the measured peak where it is loosest: water's kernel sum at a
+// fine voxel, whose interior leaves (most of them) carry no mesh. A pool of 48 x 48 x 24 water
+// particles at d_p 20 mm, voxel 5 mm; every format and grid, so that all of them count.
+TEST_F(Cli, MemoryEstimateBoundsThePeakOfWaterAtAFineVoxel) {
+  rime::io::ParticleFrame frame;
+  frame.spacing = 0.02;
+  frame.frame = 1;
+  std::vector<rime::Vec3f> positions;
+  for (int i = 0; i < 48; ++i)
+    for (int j = 0; j < 48; ++j)
+      for (int k = 0; k < 24; ++k) positions.push_back(rime::Vec3f(i, j, k) * 0.02f);
+  const std::size_t n = positions.size();
+  frame.SetPositions(positions);
+  frame.Set("vx", std::vector<float>(n, 0.5f));
+  frame.Set("vy", std::vector<float>(n, 0.0f));
+  frame.Set("vz", std::vector<float>(n, 0.0f));
+  frame.Set("phase", std::vector<std::uint8_t>(n, 0));
+  rime::io::WriteParticleFrame(Frame(1), frame);
+  const std::string args =
+      Frame(1).string() + " -o " + Out() + " -j 1 --phase water --field kernel_sum --voxel-size 0.005 --format obj,ply,vdb --vel --density";
+  const RunResult refused = Execute(args + " --memory-budget 1");
+  ASSERT_EQ(refused.code, 10) << refused.output;
+  const double estimate = NeededBytes(refused.output);
+  ASSERT_GT(estimate, 0) << refused.output;
+  const RunResult ran = Execute(args + " --json-summary " + (dir_ / "summary.json").string());
+  ASSERT_EQ(ran.code, 0) << ran.output;
+  const std::string summary = rime::test::ReadFile(dir_ / "summary.json");
+  const auto key = summary.find("\"peak_memory_bytes\":");
+  ASSERT_NE(key, std::string::npos) << summary;
+  const double peak = std::stod(summary.substr(key + 20));
+  std::printf("water pool, %zu particles at voxel d_p/4: estimate %.1f MiB, measured peak %.1f MiB (estimate / peak %.2f)\n", n,
+              estimate / 1048576, peak / 1048576, estimate / peak);
+  EXPECT_GT(estimate, peak);
 }
 
 TEST_F(Cli, RefusesMalformedMemoryBudgetAndPathsOutsideTheSandbox) {
