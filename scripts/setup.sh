@@ -18,8 +18,9 @@ PACKAGES=(
 PRESET="${1:-tools}"
 CONFIGURE_PRESET="$PRESET"
 [ "$PRESET" = tools ] && CONFIGURE_PRESET=test
-# The fuzz preset builds with clang and links libFuzzer and the sanitizer runtimes.
-[ "$PRESET" = fuzz ] && PACKAGES+=(clang libclang-rt-14-dev)
+# The fuzz preset builds with clang and links libFuzzer and the sanitizer runtimes; clang-format (the
+# style test, docs/design.md "Tests") shares clang's LLVM libraries, so it costs little there.
+[ "$PRESET" = fuzz ] && PACKAGES+=(clang libclang-rt-14-dev clang-format)
 
 missing=()
 for p in "${PACKAGES[@]}"; do

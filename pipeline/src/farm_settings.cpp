@@ -3,7 +3,7 @@
 #include <fmt/format.h>
 
 #include <fstream>
-#include <regex>
+#include <stdexcept>
 #include <sstream>
 #include <toml++/toml.h>
 
@@ -27,49 +27,30 @@ toml::table ParseFile(const fs::path& file) {
   }
 }
 
-// A string the scheduler parses: checked here so a typo fails before anything is submitted.
-std::string Checked(io::TomlReader& t, const std::string& key, const std::string& fallback, const std::regex& pattern, const char* what) {
-  const std::string value = t.String(key, fallback);
-  if (!value.empty() && !std::regex_match(value, pattern)) t.Fail(key, fmt::format("'{}' is not {}", value, what));
-  return value;
-}
-
-// `[farm.time]` / `[farm.memory]`: per-stage values; `default` replaces every stage this table
-// does not name (the scene's table over the site file's).
-void ParsePerStage(io::TomlReader t, std::array<std::string, kStageCount>& values, const std::regex& pattern, const char* what) {
+// `[farm.time]` / `[farm.memory]` over `values`: a stage the table names takes its value, the
+// others the table's `default` when it has one.
+template <class PerStage>
+void LoadPerStage(io::TomlReader t, std::array<std::string, kStageCount>& values) {
+  const auto stage_of = [](std::string_view name) {
+    const std::optional<Stage> stage = ParseStage(std::string(name));
+    if (!stage) throw std::logic_error(fmt::format("[farm] per-stage key '{}' names no stage", name));
+    return static_cast<int>(*stage);
+  };
+  PerStage table;
+  io::LoadSettings(t, table);
   const bool has_default = t.Has("default");
-  const std::string fallback = Checked(t, "default", "", pattern, what);
-  for (int s = 0; s < kStageCount; ++s)
-    values[s] = Checked(t, StageName(static_cast<Stage>(s)), has_default ? fallback : values[s], pattern, what);
+  PerStage::Visit(table, [&](const io::Param& p, const std::string& value) {
+    if (p.name == "default") return;
+    if (t.Has(std::string(p.name))) values[stage_of(p.name)] = value;
+    else if (has_default) values[stage_of(p.name)] = table.all;
+  });
   t.RejectUnknownKeys();
 }
 
 void ParseFarmTable(io::TomlReader t, FarmSettings& f) {
-  static const std::regex kName("[A-Za-z0-9_.,:+-]+");
-  // Slurm's --time formats: M, M:S, H:M:S, D-H, D-H:M, D-H:M:S.
-  static const std::regex kTime("[0-9]+(:[0-9]+){0,2}|[0-9]+-[0-9]+(:[0-9]+){0,2}");
-  static const std::regex kMemory("[0-9]+[KMGT]?");
-  static const std::regex kGres("[A-Za-z0-9_]+(:[A-Za-z0-9_.-]+)*(:[0-9]+)?");
-  f.partition = Checked(t, "partition", f.partition, kName, "a partition name (or comma-separated list)");
-  f.sim_partition = Checked(t, "sim_partition", f.sim_partition, kName, "a partition name (or comma-separated list)");
-  f.account = Checked(t, "account", f.account, kName, "an account name");
-  f.qos = Checked(t, "qos", f.qos, kName, "a QOS name");
-  ParsePerStage(t.Table("time"), f.time, kTime, "a Slurm time limit (minutes, H:M:S or D-H:M:S)");
-  ParsePerStage(t.Table("memory"), f.memory, kMemory, "a Slurm memory size (e.g. 4000M or 16G)");
-  f.chunk = static_cast<int>(t.Integer("chunk", f.chunk, io::Range::Closed(1, 100000)));
-  f.stream_tasks = static_cast<int>(t.Integer("stream_tasks", f.stream_tasks, io::Range::Closed(0, 100000)));
-  f.cpus_per_task = static_cast<int>(t.Integer("cpus_per_task", f.cpus_per_task, io::Range::Closed(1, 4096)));
-  f.sim_cpus_per_task = static_cast<int>(t.Integer("sim_cpus_per_task", f.sim_cpus_per_task, io::Range::Closed(0, 4096)));
-  f.gpus = t.Bool("gpus", f.gpus);
-  f.gpu_gres = Checked(t, "gpu_gres", f.gpu_gres, kGres, "a GRES request such as gpu:1 or gpu:a100:1");
-  if (t.Has("sbatch")) {
-    f.sbatch_lines = t.StringList("sbatch");
-    for (const auto& line : f.sbatch_lines)
-      if (line.rfind("-", 0) != 0 || line.find_first_of("\n\r") != std::string::npos)
-        t.Fail("sbatch", fmt::format("'{}' is not one sbatch option (each entry is one line such as \"--constraint=avx2\")", line));
-  }
-  f.bin_dir = t.String("bin_dir", f.bin_dir);
-  if (!f.bin_dir.empty() && fs::path(f.bin_dir).is_relative()) t.Fail("bin_dir", "must be an absolute path as the nodes see it");
+  io::LoadSettings(t, f);
+  LoadPerStage<io::FarmTimes>(t.Table("time"), f.time);
+  LoadPerStage<io::FarmMemory>(t.Table("memory"), f.memory);
   t.RejectUnknownKeys();
 }
 

@@ -672,6 +672,37 @@ TEST_F(Bake, FarmTaskScriptPassesArgumentsThroughUnchanged) {
   }
 }
 
+// `[farm.time]` / `[farm.memory]`: the scene's table over the site file's, its `default` filling
+// the stages it does not name; every stage has a key.
+TEST_F(Bake, FarmPerStageValuesLayerSiteAndScene) {
+  WriteFile(root_ / "site.toml", "[farm]\n[farm.time]\nsim = \"12:00:00\"\nclean = \"20\"\n[farm.memory]\ndefault = \"4G\"\n");
+  WriteFile(root_ / "farm_scene.toml", "[farm.time]\nsurface = \"5\"\n[farm.memory]\ndefault = \"8G\"\nsim = \"64G\"\n");
+  const FarmSettings settings = LoadFarmSettings(root_ / "site.toml", root_ / "farm_scene.toml");
+  for (int s = 0; s < kStageCount; ++s) {
+    const Stage stage = static_cast<Stage>(s);
+    const std::string time = stage == Stage::kSim ? "12:00:00" : stage == Stage::kClean ? "20" : stage == Stage::kSurface ? "5" : "";
+    EXPECT_EQ(settings.time[s], time) << StageName(stage);
+    EXPECT_EQ(settings.memory[s], stage == Stage::kSim ? "64G" : "8G") << StageName(stage);
+  }
+  int keys = 0;
+  const io::FarmTimes declared;
+  io::FarmTimes::Visit(declared, [&](const io::Param& p, const std::string&) {
+    if (p.name == "default") return;
+    EXPECT_TRUE(ParseStage(std::string(p.name)).has_value()) << p.name;
+    ++keys;
+  });
+  EXPECT_EQ(keys, kStageCount);
+
+  WriteFile(root_ / "bad_site.toml", "[farm]\n[farm.memory]\npreview = \"lots\"\n");
+  try {
+    LoadFarmSettings(root_ / "bad_site.toml", root_ / "farm_scene.toml");
+    ADD_FAILURE() << "a memory size 'lots' was accepted";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("farm.memory.preview"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("'lots' is not a Slurm memory size"), std::string::npos) << e.what();
+  }
+}
+
 TEST_F(Bake, CorruptStateRebuildsEverythingWithAWarning) {
   ASSERT_EQ(RunBake(), 0) << output_;
   WriteFile(Out() / "cache/.rime-bake/state.json", "{ not json");

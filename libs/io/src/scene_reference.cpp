@@ -7,6 +7,7 @@
 #include "rime/core/error.h"
 #include "rime/io/scene.h"
 #include "rime/io/scene_bake.h"
+#include "rime/io/scene_farm.h"
 
 namespace rime::io {
 
@@ -24,6 +25,7 @@ std::string DescribeAccepted(const Param& p, std::span<const std::string_view> n
 
 template <class T>
 std::string DescribeAccepted(const Param& p, const T&) {
+  if (!p.accepted.empty()) return std::string(p.accepted);
   if constexpr (NamedEnum<T>) return DescribeAccepted(p, Names(T{}));
   else if constexpr (std::is_same_v<T, std::vector<std::string>>) return DescribeAccepted(p, p.choices);
   else if constexpr (std::is_same_v<T, bool> || std::is_same_v<T, std::string> || std::is_same_v<T, std::filesystem::path>) return "";
@@ -72,7 +74,7 @@ std::string FlagRows() {
 }  // namespace
 
 std::vector<ReferenceTable> SceneReferenceTables() {
-  const std::string scenes = "scene-reference.md", tools = "tools.md", header(kFlagTableHeader);
+  const std::string scenes = "scene-reference.md", tools = "tools.md", farm = "farm.md", header(kFlagTableHeader);
   return {
       {scenes, "scene", MarkdownTable<SceneInfo>()},
       {scenes, "water", MarkdownTable<FluidSettings>()},
@@ -89,6 +91,9 @@ std::vector<ReferenceTable> SceneReferenceTables() {
       {scenes, "surface", MarkdownTable<SurfaceSettings>()},
       {scenes, "clean", MarkdownTable<CleanupSettings>()},
       {scenes, "bake", MarkdownTable<BakeSettings>()},
+      {farm, "farm", MarkdownTable<FarmSettings>()},
+      {farm, "farm.time", MarkdownTable<FarmTimes>()},
+      {farm, "farm.memory", MarkdownTable<FarmMemory>()},
       {tools, "flags: boundary", header + FlagRows<FluidSettings>() + FlagRows<SolidObject>()},
       {tools, "flags: sim", header + FlagRows<SceneInfo>()},
       {tools, "flags: surface", header + FlagRows<SurfaceSettings>()},

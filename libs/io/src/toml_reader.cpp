@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <regex>
 #include <vector>
 #include <fmt/ranges.h>
 #include <toml++/toml.h>
@@ -239,6 +240,10 @@ Vec3d TomlReader::ScalarOrVector(const std::string& key, const Vec3d& fallback, 
     return {v, v, v};
   }
   return Vector(key, fallback, range);
+}
+
+void TomlReader::CheckPattern(const std::string& key, const std::string& value, std::string_view pattern, std::string_view accepted) const {
+  if (!std::regex_match(value, std::regex(pattern.begin(), pattern.end()))) Fail(key, fmt::format("'{}' is not {}", value, accepted));
 }
 
 std::vector<std::string> TomlReader::StringList(const std::string& key, const std::vector<std::string>& allowed) {

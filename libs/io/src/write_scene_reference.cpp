@@ -1,5 +1,5 @@
-// rime-scene-reference: rewrites the generated tables of docs/scene-reference.md and docs/tools.md
-// from the settings declarations (rime/io/scene_reference.h); the io tests fail until it has run
+// rime-scene-reference: rewrites the generated tables of docs/scene-reference.md, docs/tools.md and
+// docs/farm.md from the settings declarations (rime/io/scene_reference.h); the io tests fail until it has run
 // after a change.
 #include <fmt/format.h>
 
@@ -11,7 +11,7 @@
 
 int main(int argc, char** argv) {
   if (argc < 2) {
-    fmt::print(stderr, "usage: rime-scene-reference docs/scene-reference.md docs/tools.md\n");
+    fmt::print(stderr, "usage: rime-scene-reference docs/scene-reference.md docs/tools.md docs/farm.md\n");
     return 2;
   }
   for (int k = 1; k < argc; ++k) {

@@ -14,7 +14,7 @@ namespace rime::io {
 namespace {
 
 TEST(SceneReference, DocsTablesMatchTheDeclarations) {
-  for (const std::string name : {"scene-reference.md", "tools.md"}) {
+  for (const std::string name : {"scene-reference.md", "tools.md", "farm.md"}) {
     const std::string path = std::string(RIME_SOURCE_DIR) + "/docs/" + name;
     std::stringstream page;
     page << std::ifstream(path, std::ios::binary).rdbuf();
@@ -25,7 +25,7 @@ TEST(SceneReference, DocsTablesMatchTheDeclarations) {
             << path << " has no generated table [" << table.section << "]";
     EXPECT_TRUE(UpdateReferenceTables(page.str()) == page.str())
         << path << " disagrees with the declarations: run "
-        << "`build/rime/bin/rime-scene-reference docs/scene-reference.md docs/tools.md`";
+        << "`build/rime/bin/rime-scene-reference docs/scene-reference.md docs/tools.md docs/farm.md`";
   }
 }
 

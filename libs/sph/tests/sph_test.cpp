@@ -115,7 +115,7 @@ TEST(Iisph, BlockAtRestStaysAtRest) {
   EXPECT_LT(energy_8s, energy_4s);
   EXPECT_LT(speed_8s, 0.02);
   EXPECT_LT(mean_8s, 0.002);
-  // The "average density error below η" holds for the solve's prediction (what η is
+  // "Average density error below η" holds for the solve's prediction (what η is
   // checked against); the measured compression of this block is 0.23 % at 8 s (printed; README, stats.jsonl).
   EXPECT_LT(last.average_density_error, scene.solver.eta);
   EXPECT_EQ(sim->removed_total(), 0);
@@ -188,11 +188,9 @@ TEST(Iisph, SealedFullTankOnlyLosesEnergy) {
   EXPECT_EQ(sim.removed_total(), 0);
 }
 
-// Output frames must not jolt water at rest. NextTimeStep used to shorten only the last one or two
-// steps before each frame time, so under the adaptive step Δt jumped (4.9 -> 3.0 -> 4.9 ms) at
-// every frame, and each jump kicked the block. On this 8³ block at 24/25 fps the kinetic energy at the frames of 3-5 s was 986/3600 µJ
-// on average (max speed at 5 s 0.030/0.062 m/s); with equal steps up to each frame 10.2/10.4 µJ
-// (0.0039/0.0033 m/s).
+// Output frames must not jolt water at rest: NextTimeStep takes equal steps up to each frame time,
+// since a short last step before the frame makes the adaptive Δt jump there, and each jump kicks
+// the block (kinetic energy about 100 times what settled water keeps).
 TEST(Iisph, OutputFramesDoNotJoltWaterAtRest) {
   for (const double fps : {24.0, 25.0}) {
     io::Scene scene = test::ColumnScene(0.02, 8, 8, 8, 0.3);

@@ -19,11 +19,14 @@
 
 #include "rime/exec/device.h"
 #include "rime/sph/simulation.h"
+#include "rime/test/measure.h"
 #include "rime/test/sph_scenes.h"
 
 using namespace rime;
 
 namespace {
+
+using test::Median;
 
 struct Result {
   std::string name;
@@ -114,11 +117,6 @@ double CpuSeconds() {
   return double(usage.ru_utime.tv_sec + usage.ru_stime.tv_sec) + 1e-6 * double(usage.ru_utime.tv_usec + usage.ru_stime.tv_usec);
 }
 
-double Median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  return v[v.size() / 2];
-}
-
 Result Run(const std::string& name, const io::Scene& scene, int warmup, int steps, int repeats, bool frozen = false) {
   Result r;
   r.name = name;
@@ -172,28 +170,23 @@ constexpr double kReferenceStepMs[2] = {165, 205};
 constexpr double kReferenceNeighborMs[2] = {49, 57};
 constexpr double kReferencePressureMs = 58;
 
-double LoadAverage() {
-  double load[1] = {0};
-  return getloadavg(load, 1) == 1 ? load[0] : -1;
-}
-
 int main(int argc, char** argv) {
   CLI::App app{"Rime simulation benchmark (dam break)"};
   int steps = 50, warmup = 20, repeats = 3, threads = 0;
   std::vector<std::string> only;
-  std::string json_path = "sim_bench.json";
+  std::string json_path = RIME_BENCH_OUTPUT_DIR "/results.json";
   bool quick = false;
   app.add_option("--steps", steps, "Timed steps per run");
   app.add_option("--warmup", warmup, "Untimed steps before the timed ones (the block starts falling)");
   app.add_option("--only", only, "Run only the cases of these names (repeatable)");
   app.add_option("--repeats", repeats, "Runs per case (the median is reported)");
   app.add_option("-j,--threads", threads, "CPU threads (default all)");
-  app.add_option("--json", json_path, "JSON output file");
+  app.add_option("--json", json_path, "JSON output file")->capture_default_str();
   app.add_flag("--quick", quick, "Only the 50k cases");
   CLI11_PARSE(app, argc, argv);
   exec::SetCpuThreads(threads);
   const double dp = 0.0264;
-  const double load_before = LoadAverage();
+  const double load_before = test::LoadAverage();
   std::vector<Result> results;
   struct Case {
     std::string name;
@@ -216,7 +209,7 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "rime-bench-sim: no case of the names given\n");
     return 2;
   }
-  const double load_after = LoadAverage();
+  const double load_after = test::LoadAverage();
   std::printf(
       "\nRime simulation benchmark, %d CPU threads, float, dt = 1 ms, eta = 0.1 %%, median of %d runs of %d steps after %d warm-up steps; "
       "load average %.2f before, %.2f after\n",
@@ -287,7 +280,15 @@ int main(int argc, char** argv) {
     std::printf("freezing share of the liquid freezing step: %.1f %% (target <= 25 %%)\n", 100 * liquid->freezing / liquid->ms_step);
   if (liquid && frozen)
     std::printf("mostly frozen step / liquid step: %.1f %% (target <= 15 %%)\n", 100 * frozen->ms_step / liquid->ms_step);
-  std::ofstream(json_path) << out.dump(2) << "\n";
+  std::ofstream(json_path) << nlohmann::json{{"benchmark", "sim"},
+                                             {"machine", test::MachineDescription()},
+                                             {"commit", test::SourceCommit(RIME_SOURCE_DIR)},
+                                             {"threads", exec::CpuThreads()},
+                                             {"load_average_before", load_before},
+                                             {"load_average_after", load_after},
+                                             {"results", out}}
+                                  .dump(2)
+                           << "\n";
   std::printf("(peak memory is the process maximum so far, so it is cumulative down the table)\nwrote %s\n", json_path.c_str());
   return 0;
 }

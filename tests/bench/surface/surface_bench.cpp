@@ -6,9 +6,8 @@
 // --threads caps the worker threads (default: the CPUs the process may use); at --threads 1 "per
 // core" is measured directly instead of divided out of a shared machine's parallel run.
 // Peak memory is measured in a child process per case (fork), so cases do not inherit each
-// other's peaks. The parent never runs TBB: a child forked after TBB has started its workers gets
-// none and runs every parallel loop on one thread (this benchmark measured one core until the
-// particle generator, which uses TBB, moved into a child of its own).
+// other's peaks. The parent never runs TBB, not even to generate particles: a child forked after
+// TBB has started its workers gets none and runs every parallel loop on one thread.
 #include <openvdb/openvdb.h>
 #include <openvdb/tools/ParticlesToLevelSet.h>
 #include <openvdb/tools/VolumeToMesh.h>

@@ -1,6 +1,5 @@
 // rime-boundary as a user runs it: outputs, exit codes, one-line errors and no output on bad input.
 #include <gtest/gtest.h>
-#include <sys/wait.h>
 
 #include <filesystem>
 #include <fstream>
@@ -8,6 +7,7 @@
 
 #include "rime/io/particles.h"
 #include "rime/test/files.h"
+#include "rime/test/run_command.h"
 #include "rime/test/temp_folder.h"
 
 namespace {
@@ -16,29 +16,21 @@ namespace fs = std::filesystem;
 
 const fs::path kTool = fs::path(RIME_BINARY_DIR) / "bin" / "rime-boundary";
 
-struct Result {
-  int code;
-  std::string err;
-};
+using Result = rime::test::CommandResult;
 
 class RimeBoundaryTool : public ::testing::Test {
  protected:
   void SetUp() override { Write("tetra.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n"); }
   void Write(const std::string& name, const std::string& text) { rime::test::WriteFile(dir_ / name, text); }
-  Result Run(const std::string& args) {
-    const fs::path err = dir_ / "stderr.txt";
-    const std::string command = kTool.string() + " " + args + " -q 2> " + err.string() + " > /dev/null";
-    const int status = std::system(command.c_str());
-    return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, rime::test::ReadFile(err)};
-  }
+  Result Run(const std::string& args) { return rime::test::RunCommand(kTool.string() + " " + args + " -q", rime::test::Capture::kStderr); }
   // Exit code 3, one error line naming `names`, and no output file.
   void ExpectBadInput(const std::string& args, const std::string& names, const fs::path& output) {
     SCOPED_TRACE(args);
     const Result r = Run(args);
-    EXPECT_EQ(r.code, 3) << r.err;
-    EXPECT_NE(r.err.find("rime-boundary: error: "), std::string::npos) << r.err;
-    EXPECT_NE(r.err.find(names), std::string::npos) << r.err;
-    EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
+    EXPECT_EQ(r.code, 3) << r.output;
+    EXPECT_NE(r.output.find("rime-boundary: error: "), std::string::npos) << r.output;
+    EXPECT_NE(r.output.find(names), std::string::npos) << r.output;
+    EXPECT_EQ(std::count(r.output.begin(), r.output.end(), '\n'), 1) << r.output;
     EXPECT_FALSE(fs::exists(output)) << output;
     for (const auto& entry : fs::directory_iterator(dir_))
       EXPECT_EQ(entry.path().string().find(".tmp."), std::string::npos) << "temporary file left: " << entry.path();
@@ -51,7 +43,7 @@ TEST_F(RimeBoundaryTool, MeshToFileWithTransformAndSummary) {
   const fs::path out = dir_ / "tetra.h5part", summary = dir_ / "summary.json";
   const Result r = Run((dir_ / "tetra.obj").string() + " -o " + out.string() +
                        " --spacing 0.1 --scale 2 --rotate 0,0,90 --translate 0,0,1 --json-summary " + summary.string());
-  ASSERT_EQ(r.code, 0) << r.err;
+  ASSERT_EQ(r.code, 0) << r.output;
   const rime::io::ParticleFrame frame = rime::io::ReadParticleFrame(out, "boundary");
   EXPECT_GT(frame.size(), 100u);
   EXPECT_DOUBLE_EQ(frame.numbers.at("boundary_spacing"), 0.05);
@@ -72,7 +64,7 @@ TEST_F(RimeBoundaryTool, SceneToFolder) {
         "[[solid]]\nname = \"ring\"\nshape = \"torus\"\nradius = 0.2\nminor_radius = 0.05\n");
   const fs::path out = dir_ / "boundary";
   const Result r = Run((dir_ / "scene.toml").string() + " -o " + out.string());
-  ASSERT_EQ(r.code, 0) << r.err;
+  ASSERT_EQ(r.code, 0) << r.output;
   std::uint32_t id = 0;
   for (const char* name : {"tank", "prop", "ring"}) {
     const rime::io::ParticleFrame f = rime::io::ReadParticleFrame(out / (std::string(name) + ".h5part"), "boundary");
@@ -113,6 +105,15 @@ TEST_F(RimeBoundaryTool, BadInputExitsWithCode3AndNoOutput) {
 TEST_F(RimeBoundaryTool, UsageErrors) {
   EXPECT_EQ(Run((dir_ / "tetra.obj").string()).code, 2);  // no -o
   EXPECT_EQ(Run((dir_ / "tetra.obj").string() + " -o x.h5part --rotate 1,2").code, 2);
+  const Result two_scales = Run((dir_ / "tetra.obj").string() + " -o x.h5part --scale 1,2");
+  EXPECT_EQ(two_scales.code, 2);
+  EXPECT_NE(two_scales.output.find("--scale takes one number or three numbers x,y,z"), std::string::npos) << two_scales.output;
+  // The transform flags are for a single mesh: a scene sets them per [[solid]].
+  Write("scene_flags.toml", "[[solid]]\nname = \"floor\"\nshape = \"plane\"\nsize = [1, 1, 0.1]\n");
+  const Result scene = Run((dir_ / "scene_flags.toml").string() + " -o " + (dir_ / "scene_flags").string() + " --up-axis y");
+  EXPECT_EQ(scene.code, 2);
+  EXPECT_NE(scene.output.find("are for a single mesh"), std::string::npos) << scene.output;
+  EXPECT_FALSE(fs::exists(dir_ / "scene_flags"));
 }
 
 }  // namespace
@@ -123,12 +124,12 @@ TEST_F(RimeBoundaryTool, RefusesAboveTheMemoryBudgetWithoutOutput) {
   // A unit tetrahedron at d_b = 1 mm: about 2.4 M particles, hundreds of MB.
   const Result mesh =
       Run((dir_ / "tetra.obj").string() + " -o " + (dir_ / "tetra.h5part").string() + " --spacing 0.002 --memory-budget 1M");
-  EXPECT_EQ(mesh.code, 10) << mesh.err;
-  EXPECT_NE(mesh.err.find("rime-boundary: error: needs about "), std::string::npos) << mesh.err;
-  EXPECT_NE(mesh.err.find(" triangles and 2.37 M particles (" + (dir_ / "tetra.obj").string() +
-                          ", spacing 2 mm), budget 1 MiB (--memory-budget)"),
+  EXPECT_EQ(mesh.code, 10) << mesh.output;
+  EXPECT_NE(mesh.output.find("rime-boundary: error: needs about "), std::string::npos) << mesh.output;
+  EXPECT_NE(mesh.output.find(" triangles and 2.37 M particles (" + (dir_ / "tetra.obj").string() +
+                             ", spacing 2 mm), budget 1 MiB (--memory-budget)"),
             std::string::npos)
-      << mesh.err;
+      << mesh.output;
   EXPECT_FALSE(fs::exists(dir_ / "tetra.h5part"));
   // A scene: the first solid fits, the box (about 550 k particles, 66 MB) does not; no file of
   // either is written. The budget leaves room for the process itself (about 25 MB).
@@ -137,13 +138,13 @@ TEST_F(RimeBoundaryTool, RefusesAboveTheMemoryBudgetWithoutOutput) {
         "[[solid]]\nname = \"prop\"\nshape = \"mesh\"\nmesh = \"tetra.obj\"\nscale = 0.05\n\n"
         "[[solid]]\nname = \"tank\"\nshape = \"box\"\ncontainer = true\nsize = [1.0, 0.5, 0.4]\n");
   const Result scene = Run((dir_ / "scene.toml").string() + " -o " + (dir_ / "boundary").string() + " --memory-budget 48M");
-  EXPECT_EQ(scene.code, 10) << scene.err;
-  EXPECT_NE(scene.err.find("particles (solid tank, spacing 4 mm), budget 48 MiB"), std::string::npos) << scene.err;
-  EXPECT_EQ(std::count(scene.err.begin(), scene.err.end(), '\n'), 1) << scene.err;
+  EXPECT_EQ(scene.code, 10) << scene.output;
+  EXPECT_NE(scene.output.find("particles (solid tank, spacing 4 mm), budget 48 MiB"), std::string::npos) << scene.output;
+  EXPECT_EQ(std::count(scene.output.begin(), scene.output.end(), '\n'), 1) << scene.output;
   EXPECT_FALSE(fs::exists(dir_ / "boundary"));
   // The same scene under the default budget (the memory available).
   const Result fits = Run((dir_ / "scene.toml").string() + " -o " + (dir_ / "boundary").string());
-  EXPECT_EQ(fits.code, 0) << fits.err;
+  EXPECT_EQ(fits.code, 0) << fits.output;
   EXPECT_TRUE(fs::exists(dir_ / "boundary" / "tank.h5part"));
 }
 
@@ -163,18 +164,18 @@ TEST_F(RimeBoundaryTool, SandboxRefusesSceneMeshesOutsideIt) {
     SCOPED_TRACE(mesh);
     scene_with_mesh(mesh);
     const Result r = Run(box + "/scene.toml -o " + box + "/boundary --sandbox " + box);
-    EXPECT_EQ(r.code, 3) << r.err;
-    EXPECT_NE(r.err.find(box + "/scene.toml: solid 'prop' mesh "), std::string::npos) << r.err;
-    EXPECT_NE(r.err.find("resolves to " + (dir_ / "outside" / "tetra.obj").string() + ", outside the sandbox " + box), std::string::npos)
-        << r.err;
+    EXPECT_EQ(r.code, 3) << r.output;
+    EXPECT_NE(r.output.find(box + "/scene.toml: solid 'prop' mesh "), std::string::npos) << r.output;
+    EXPECT_NE(r.output.find("resolves to " + (dir_ / "outside" / "tetra.obj").string() + ", outside the sandbox " + box), std::string::npos)
+        << r.output;
     EXPECT_FALSE(fs::exists(dir_ / "box" / "boundary"));
   }
   scene_with_mesh("tetra.obj");
   const Result escape = Run(box + "/scene.toml -o " + box + "/../boundary --sandbox " + box);
-  EXPECT_EQ(escape.code, 2) << escape.err;
+  EXPECT_EQ(escape.code, 2) << escape.output;
   EXPECT_FALSE(fs::exists(dir_ / "boundary"));
   const Result inside = Run(box + "/scene.toml -o " + box + "/boundary --sandbox " + box);
-  EXPECT_EQ(inside.code, 0) << inside.err;
+  EXPECT_EQ(inside.code, 0) << inside.output;
   EXPECT_TRUE(fs::exists(dir_ / "box" / "boundary" / "prop.h5part"));
 }
 

@@ -1,9 +1,7 @@
 // End-to-end checks of the rime-clean executable: outputs, names, reports and bad input.
 #include <gtest/gtest.h>
-#include <sys/wait.h>
 #include <unistd.h>
 
-#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
@@ -14,6 +12,7 @@
 #include "rime/clean/procedural.h"
 #include "rime/clean/quality.h"
 #include "rime/test/files.h"
+#include "rime/test/run_command.h"
 #include "rime/test/temp_folder.h"
 
 namespace rime {
@@ -22,17 +21,9 @@ namespace fs = std::filesystem;
 
 const fs::path kTool = fs::path(RIME_BINARY_DIR) / "bin" / "rime-clean";
 
-struct ToolRun {
-  int code;
-  std::string err;
-};
+using ToolRun = test::CommandResult;
 
-ToolRun Clean(const std::string& args, const fs::path& dir) {
-  const fs::path err = dir / "stderr.txt";
-  const std::string command = kTool.string() + " -q " + args + " 2> " + err.string();
-  const int status = std::system(command.c_str());
-  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, test::ReadFile(err)};
-}
+ToolRun Clean(const std::string& args) { return test::RunCommand(kTool.string() + " -q " + args, test::Capture::kStderr); }
 
 class CleanTool : public ::testing::Test {
  protected:
@@ -55,9 +46,8 @@ io::TriMesh NoisyBallWithSpeck() {
 TEST_F(CleanTool, OneMeshToOneFileWithReportAndVelocity) {
   io::WriteMesh(dir_ / "ball.ply", NoisyBallWithSpeck());
   const ToolRun r = Clean((dir_ / "ball.ply").string() + " -o " + (dir_ / "clean.ply").string() + " --report " +
-                              (dir_ / "report.json").string() + " --json-summary " + (dir_ / "summary.json").string(),
-                          dir_);
-  ASSERT_EQ(r.code, 0) << r.err;
+                          (dir_ / "report.json").string() + " --json-summary " + (dir_ / "summary.json").string());
+  ASSERT_EQ(r.code, 0) << r.output;
   const io::TriMesh out = io::ReadMesh(dir_ / "clean.ply");
   const clean::MeshStats s = clean::ComputeStats(out);
   EXPECT_EQ(s.components, 1u);
@@ -79,8 +69,8 @@ TEST_F(CleanTool, OneMeshToOneFileWithReportAndVelocity) {
 TEST_F(CleanTool, SequenceToFolderWithFramesAndFormat) {
   fs::create_directories(dir_ / "in");
   for (int f = 1; f <= 3; ++f) io::WriteMesh(io::FramePath(dir_ / "in", "ice", f, "obj"), clean::procedural::NoisyBall(3000, f));
-  ToolRun r = Clean((dir_ / "in").string() + " -o " + (dir_ / "out").string() + " --frames 2-3 -j 2 --format ply", dir_);
-  ASSERT_EQ(r.code, 0) << r.err;
+  ToolRun r = Clean((dir_ / "in").string() + " -o " + (dir_ / "out").string() + " --frames 2-3 -j 2 --format ply");
+  ASSERT_EQ(r.code, 0) << r.output;
   EXPECT_FALSE(fs::exists(dir_ / "out" / "ice_clean.0001.ply"));
   EXPECT_TRUE(fs::exists(dir_ / "out" / "ice_clean.0002.ply"));
   EXPECT_TRUE(fs::exists(dir_ / "out" / "ice_clean.0003.ply"));
@@ -88,31 +78,30 @@ TEST_F(CleanTool, SequenceToFolderWithFramesAndFormat) {
   EXPECT_TRUE(fs::exists(dir_ / "out" / "ice_clean.0003.json"));  // per-frame report
   EXPECT_GT(io::ReadMesh(dir_ / "out" / "ice_clean.0003.ply").triangle_count(), 0u);
   // The rime-bake call: one frame into a folder gives OBJ, PLY and the report.
-  r = Clean((dir_ / "in" / "ice.0001.obj").string() + " -o " + (dir_ / "bake").string(), dir_);
-  ASSERT_EQ(r.code, 0) << r.err;
+  r = Clean((dir_ / "in" / "ice.0001.obj").string() + " -o " + (dir_ / "bake").string());
+  ASSERT_EQ(r.code, 0) << r.output;
   for (const char* name : {"ice_clean.0001.obj", "ice_clean.0001.ply", "ice_clean.0001.json"})
     EXPECT_TRUE(fs::exists(dir_ / "bake" / name)) << name;
   // Several inputs and a file name: refused as a usage error.
-  r = Clean((dir_ / "in").string() + " -o " + (dir_ / "x.obj").string(), dir_);
-  EXPECT_EQ(r.code, 2) << r.err;
+  r = Clean((dir_ / "in").string() + " -o " + (dir_ / "x.obj").string());
+  EXPECT_EQ(r.code, 2) << r.output;
 }
 
 TEST_F(CleanTool, SceneDefaultsAndFlagsOverride) {
   io::WriteMesh(dir_ / "ball.obj", clean::procedural::NoisyBall(6000, 2));
   std::ofstream(dir_ / "scene.toml") << "[clean]\ndecimate_ratio = 0.25\nsmooth = \"none\"\n";
-  ToolRun r = Clean((dir_ / "ball.obj").string() + " -o " + (dir_ / "a.obj").string() + " --scene " + (dir_ / "scene.toml").string(), dir_);
-  ASSERT_EQ(r.code, 0) << r.err;
+  ToolRun r = Clean((dir_ / "ball.obj").string() + " -o " + (dir_ / "a.obj").string() + " --scene " + (dir_ / "scene.toml").string());
+  ASSERT_EQ(r.code, 0) << r.output;
   r = Clean((dir_ / "ball.obj").string() + " -o " + (dir_ / "b.obj").string() + " --scene " + (dir_ / "scene.toml").string() +
-                " --decimate-ratio 0.5",
-            dir_);
-  ASSERT_EQ(r.code, 0) << r.err;
+            " --decimate-ratio 0.5");
+  ASSERT_EQ(r.code, 0) << r.output;
   const double in = double(io::ReadMesh(dir_ / "ball.obj").triangle_count());
   EXPECT_NEAR(double(io::ReadMesh(dir_ / "a.obj").triangle_count()), 0.25 * in, 0.03 * in);
   EXPECT_NEAR(double(io::ReadMesh(dir_ / "b.obj").triangle_count()), 0.5 * in, 0.03 * in);
   std::ofstream(dir_ / "bad.toml") << "[clean]\ndecimate_ratio = 2\n";
-  r = Clean((dir_ / "ball.obj").string() + " -o " + (dir_ / "c.obj").string() + " --scene " + (dir_ / "bad.toml").string(), dir_);
-  EXPECT_EQ(r.code, 3) << r.err;
-  EXPECT_NE(r.err.find("bad.toml"), std::string::npos) << r.err;
+  r = Clean((dir_ / "ball.obj").string() + " -o " + (dir_ / "c.obj").string() + " --scene " + (dir_ / "bad.toml").string());
+  EXPECT_EQ(r.code, 3) << r.output;
+  EXPECT_NE(r.output.find("bad.toml"), std::string::npos) << r.output;
 }
 
 // Bad input: a clear error naming the file, exit code 3, and no output.
@@ -123,17 +112,17 @@ TEST_F(CleanTool, BadInputsExitThreeWithoutOutput) {
   std::ofstream(dir_ / "vertices_only.obj") << "v 0 0 0\nv 1 0 0\n";
   for (const char* name : {"empty.obj", "nan.obj", "garbage.ply", "missing.obj", "vertices_only.obj"}) {
     const fs::path out = dir_ / (std::string("out_") + name);
-    const ToolRun r = Clean((dir_ / name).string() + " -o " + out.string(), dir_);
-    EXPECT_EQ(r.code, 3) << name << ": " << r.err;
-    EXPECT_NE(r.err.find(name), std::string::npos) << r.err;
+    const ToolRun r = Clean((dir_ / name).string() + " -o " + out.string());
+    EXPECT_EQ(r.code, 3) << name << ": " << r.output;
+    EXPECT_NE(r.output.find(name), std::string::npos) << r.output;
     EXPECT_FALSE(fs::exists(out)) << name;
   }
   if (::geteuid() != 0) {  // root reads anything
     io::WriteMesh(dir_ / "locked.obj", clean::procedural::Icosphere(1, 1));
     fs::permissions(dir_ / "locked.obj", fs::perms::none);
-    const ToolRun r = Clean((dir_ / "locked.obj").string() + " -o " + (dir_ / "out_locked.obj").string(), dir_);
-    EXPECT_EQ(r.code, 3) << r.err;
-    EXPECT_NE(r.err.find("locked.obj"), std::string::npos) << r.err;
+    const ToolRun r = Clean((dir_ / "locked.obj").string() + " -o " + (dir_ / "out_locked.obj").string());
+    EXPECT_EQ(r.code, 3) << r.output;
+    EXPECT_NE(r.output.find("locked.obj"), std::string::npos) << r.output;
     EXPECT_FALSE(fs::exists(dir_ / "out_locked.obj"));
   }
 }
@@ -152,17 +141,17 @@ TEST_F(CleanTool, RefusesAboveTheMemoryBudgetBeforeWritingAnyFrame) {
     fs::remove_all(dir_ / "surface" / "ice.0001.ply");
     fs::remove_all(dir_ / "surface" / "ice.0001.obj");
     io::WriteMesh(dir_ / "surface" / (std::string("ice.0001.") + ext), NoisyBallWithSpeck());
-    const ToolRun r = Clean((dir_ / "surface").string() + " -o " + (dir_ / "clean").string() + " -j 1 --memory-budget 1M", dir_);
-    EXPECT_EQ(r.code, 10) << ext << ": " << r.err;
+    const ToolRun r = Clean((dir_ / "surface").string() + " -o " + (dir_ / "clean").string() + " -j 1 --memory-budget 1M");
+    EXPECT_EQ(r.code, 10) << ext << ": " << r.output;
     const std::string expected =
         " triangles (mesh " + (dir_ / "surface" / (std::string("ice.0001.") + ext)).string() + "), budget 1 MiB (--memory-budget)";
-    EXPECT_NE(r.err.find("rime-clean: error: needs about "), std::string::npos) << r.err;
-    EXPECT_NE(r.err.find(expected), std::string::npos) << r.err;
+    EXPECT_NE(r.output.find("rime-clean: error: needs about "), std::string::npos) << r.output;
+    EXPECT_NE(r.output.find(expected), std::string::npos) << r.output;
     EXPECT_FALSE(fs::exists(dir_ / "clean")) << ext;
   }
   // Under the default budget (the memory available) both frames are cleaned.
-  const ToolRun fits = Clean((dir_ / "surface").string() + " -o " + (dir_ / "clean").string() + " -j 1", dir_);
-  EXPECT_EQ(fits.code, 0) << fits.err;
+  const ToolRun fits = Clean((dir_ / "surface").string() + " -o " + (dir_ / "clean").string() + " -j 1");
+  EXPECT_EQ(fits.code, 0) << fits.output;
   EXPECT_TRUE(fs::exists(dir_ / "clean" / "ice_clean.0001.ply"));
   EXPECT_TRUE(fs::exists(dir_ / "clean" / "ice_clean.0000.ply"));
 }
@@ -173,19 +162,19 @@ TEST_F(CleanTool, SandboxRefusesASymlinkOutAndAnEscapingOutput) {
   io::WriteMesh(dir_ / "outside" / "ice.0001.ply", clean::procedural::Icosphere(0.1, 2, {0, 0, 0}));
   fs::create_symlink(dir_ / "outside" / "ice.0001.ply", dir_ / "box" / "ice.0001.ply");
   const std::string box = (dir_ / "box").string();
-  const ToolRun link = Clean(box + "/ice.0001.ply -o " + box + "/clean --sandbox " + box, dir_);
-  EXPECT_EQ(link.code, 2) << link.err;
-  EXPECT_NE(
-      link.err.find("input " + box + "/ice.0001.ply resolves to " + (dir_ / "outside" / "ice.0001.ply").string() + ", outside the sandbox"),
-      std::string::npos)
-      << link.err;
+  const ToolRun link = Clean(box + "/ice.0001.ply -o " + box + "/clean --sandbox " + box);
+  EXPECT_EQ(link.code, 2) << link.output;
+  EXPECT_NE(link.output.find("input " + box + "/ice.0001.ply resolves to " + (dir_ / "outside" / "ice.0001.ply").string() +
+                             ", outside the sandbox"),
+            std::string::npos)
+      << link.output;
   fs::remove(dir_ / "box" / "ice.0001.ply");
   fs::copy_file(dir_ / "outside" / "ice.0001.ply", dir_ / "box" / "ice.0001.ply");
-  const ToolRun escape = Clean(box + "/ice.0001.ply -o " + (dir_ / "outside" / "clean").string() + " --sandbox " + box, dir_);
-  EXPECT_EQ(escape.code, 2) << escape.err;
+  const ToolRun escape = Clean(box + "/ice.0001.ply -o " + (dir_ / "outside" / "clean").string() + " --sandbox " + box);
+  EXPECT_EQ(escape.code, 2) << escape.output;
   EXPECT_FALSE(fs::exists(dir_ / "outside" / "clean"));
-  const ToolRun inside = Clean(box + "/ice.0001.ply -o " + box + "/clean --sandbox " + box, dir_);
-  EXPECT_EQ(inside.code, 0) << inside.err;
+  const ToolRun inside = Clean(box + "/ice.0001.ply -o " + box + "/clean --sandbox " + box);
+  EXPECT_EQ(inside.code, 0) << inside.output;
   EXPECT_TRUE(fs::exists(dir_ / "box" / "clean" / "ice_clean.0001.ply"));
 }
 

@@ -2,12 +2,12 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
-#include <cstdio>
 #include <filesystem>
 #include <fstream>
 
 #include "rime/io/particles.h"
 #include "rime/test/files.h"
+#include "rime/test/run_command.h"
 #include "rime/test/temp_folder.h"
 
 namespace fs = std::filesystem;
@@ -16,20 +16,9 @@ namespace {
 
 const fs::path kBin = fs::path(RIME_BINARY_DIR) / "bin";
 
-struct Result {
-  int code;
-  std::string output;
-};
+using Result = rime::test::CommandResult;
 
-Result Exec(const std::string& command) {
-  Result r{-1, {}};
-  FILE* pipe = popen((command + " 2>&1").c_str(), "r");
-  char buffer[4096];
-  while (std::fgets(buffer, sizeof buffer, pipe)) r.output += buffer;
-  const int status = pclose(pipe);
-  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  return r;
-}
+Result Exec(const std::string& command) { return rime::test::RunCommand(command); }
 
 class SimTool : public ::testing::Test {
  protected:

@@ -46,8 +46,15 @@ struct CompactionOrder {
 }  // namespace rime::exec
 
 // Gather for the element types of every library's attributes (a library adds its own types).
-#define RIME_EXEC_KERNELS(X)                                                                                                 \
-  X(rime::exec::AffineKernel)                                                                                                \
-  X(rime::exec::IotaKernel) X(rime::exec::CompactionOrder) X(rime::exec::Gather<float>) X(rime::exec::Gather<double>)        \
-      X(rime::exec::Gather<rime::Vec3<float>>) X(rime::exec::Gather<rime::Vec3<double>>) X(rime::exec::Gather<std::int64_t>) \
-          X(rime::exec::Gather<std::uint32_t>) X(rime::exec::Gather<std::uint8_t>)
+// One kernel per line: clang-format 14 keeps that layout but rewraps a line of several on every run.
+#define RIME_EXEC_KERNELS(X)                \
+  X(rime::exec::AffineKernel)               \
+  X(rime::exec::IotaKernel)                 \
+  X(rime::exec::CompactionOrder)            \
+  X(rime::exec::Gather<float>)              \
+  X(rime::exec::Gather<double>)             \
+  X(rime::exec::Gather<rime::Vec3<float>>)  \
+  X(rime::exec::Gather<rime::Vec3<double>>) \
+  X(rime::exec::Gather<std::int64_t>)       \
+  X(rime::exec::Gather<std::uint32_t>)      \
+  X(rime::exec::Gather<std::uint8_t>)

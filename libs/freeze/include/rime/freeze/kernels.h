@@ -472,16 +472,30 @@ struct KeepUnfrozen {
 }  // namespace kernels
 }  // namespace rime::freeze
 
-#define RIME_FREEZE_KERNELS_T(X, T)                                                                                                     \
-  X(rime::freeze::kernels::MarkContacts<T>)                                                                                             \
-  X(rime::freeze::kernels::FluidAnisotropy<T>) X(rime::freeze::kernels::FilmAndGrowth<T>) X(rime::freeze::kernels::MarkWet<T>)          \
-      X(rime::freeze::kernels::DilateWet<T>) X(rime::freeze::kernels::FilmLaplacian<T>) X(rime::freeze::kernels::ApplyFilmDiffusion<T>) \
-          X(rime::freeze::kernels::DryFilm<T>) X(rime::freeze::kernels::PhaseDecision<T>) X(rime::freeze::kernels::NucleationDelay<T>)  \
-              X(rime::freeze::kernels::GrowRegion<T>) X(rime::freeze::kernels::JoinRegion<T>) X(rime::freeze::kernels::MarkAffected<T>) \
-                  X(rime::freeze::kernels::GatherListed<T>)
+// One kernel per line: clang-format 14 keeps that layout but rewraps a line of several on every run.
+#define RIME_FREEZE_KERNELS_T(X, T)               \
+  X(rime::freeze::kernels::MarkContacts<T>)       \
+  X(rime::freeze::kernels::FluidAnisotropy<T>)    \
+  X(rime::freeze::kernels::FilmAndGrowth<T>)      \
+  X(rime::freeze::kernels::MarkWet<T>)            \
+  X(rime::freeze::kernels::DilateWet<T>)          \
+  X(rime::freeze::kernels::FilmLaplacian<T>)      \
+  X(rime::freeze::kernels::ApplyFilmDiffusion<T>) \
+  X(rime::freeze::kernels::DryFilm<T>)            \
+  X(rime::freeze::kernels::PhaseDecision<T>)      \
+  X(rime::freeze::kernels::NucleationDelay<T>)    \
+  X(rime::freeze::kernels::GrowRegion<T>)         \
+  X(rime::freeze::kernels::JoinRegion<T>)         \
+  X(rime::freeze::kernels::MarkAffected<T>)       \
+  X(rime::freeze::kernels::GatherListed<T>)
 
-#define RIME_FREEZE_KERNELS(X)                                                                                            \
-  RIME_FREEZE_KERNELS_T(X, float)                                                                                         \
-  RIME_FREEZE_KERNELS_T(X, double) X(rime::freeze::kernels::MarkFluidFromBoundary) X(rime::freeze::kernels::KeepUnfrozen) \
-      X(rime::freeze::kernels::WetChanges) X(rime::freeze::kernels::AddStale) X(rime::freeze::kernels::SetListed)         \
-          X(rime::freeze::kernels::MarkRowless) X(rime::freeze::kernels::StoreRows)
+#define RIME_FREEZE_KERNELS(X)                    \
+  RIME_FREEZE_KERNELS_T(X, float)                 \
+  RIME_FREEZE_KERNELS_T(X, double)                \
+  X(rime::freeze::kernels::MarkFluidFromBoundary) \
+  X(rime::freeze::kernels::KeepUnfrozen)          \
+  X(rime::freeze::kernels::WetChanges)            \
+  X(rime::freeze::kernels::AddStale)              \
+  X(rime::freeze::kernels::SetListed)             \
+  X(rime::freeze::kernels::MarkRowless)           \
+  X(rime::freeze::kernels::StoreRows)

@@ -45,6 +45,8 @@ struct Param {
   std::string_view flag = {};                      // command-line override in CLI11 syntax ("--kr", "!--no-velocity"); empty: none
   std::string_view default_doc = {};               // docs: the default in words when the value alone does not say it
   std::span<const std::string_view> choices = {};  // allowed names of a string list
+  std::string_view pattern = {};                   // ECMAScript regex that a non-empty string, and every item of a list, matches in full
+  std::string_view accepted = {};                  // what `pattern` accepts, in words: "a Slurm memory size (e.g. 4000M or 16G)"
   bool scalar_or_vector = false;                   // a vector also accepts one number for all three components
 };
 
@@ -84,13 +86,19 @@ class TomlLoader {
   void operator()(const Param& p, int& v) const { v = static_cast<int>(t_.Integer(Key(p), v, p.range)); }
   void operator()(const Param& p, long long& v) const { v = t_.Integer(Key(p), v, p.range); }
   void operator()(const Param& p, bool& v) const { v = t_.Bool(Key(p), v); }
-  void operator()(const Param& p, std::string& v) const { v = t_.String(Key(p), v); }
+  void operator()(const Param& p, std::string& v) const {
+    v = t_.String(Key(p), v);
+    if (!p.pattern.empty() && !v.empty()) t_.CheckPattern(Key(p), v, p.pattern, p.accepted);
+  }
   void operator()(const Param& p, std::filesystem::path& v) const { v = t_.String(Key(p), v.string()); }
   void operator()(const Param& p, Vec3d& v) const {
     v = p.scalar_or_vector ? t_.ScalarOrVector(Key(p), v, p.range) : t_.Vector(Key(p), v, p.range);
   }
   void operator()(const Param& p, std::vector<std::string>& v) const {
-    if (t_.Has(Key(p))) v = t_.StringList(Key(p), {p.choices.begin(), p.choices.end()});
+    if (!t_.Has(Key(p))) return;
+    v = t_.StringList(Key(p), {p.choices.begin(), p.choices.end()});
+    if (!p.pattern.empty())
+      for (const std::string& item : v) t_.CheckPattern(Key(p), item, p.pattern, p.accepted);
   }
   template <NamedEnum E>
   void operator()(const Param& p, E& v) const {

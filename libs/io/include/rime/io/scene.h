@@ -389,11 +389,21 @@ struct Transform {
 
   template <class Self, class F>
   static void Visit(Self& s, F&& f) {
-    f(Param{.name = "scale", .range = Range::Positive(), .help = "a number or [x, y, z]", .scalar_or_vector = true}, s.scale);
-    f(Param{.name = "rotate", .unit = "degree", .range = Range::Closed(-3600, 3600), .help = "Euler angles: X, then Y, then Z"},
+    f(Param{.name = "scale",
+            .range = Range::Positive(),
+            .help = "one number for all axes, or one per axis; applied after the up-axis turn",
+            .flag = "--scale",
+            .scalar_or_vector = true},
+      s.scale);
+    f(Param{.name = "rotate",
+            .unit = "degree",
+            .range = Range::Closed(-3600, 3600),
+            .help = "Euler angles: X, then Y, then Z, after the scale",
+            .flag = "--rotate"},
       s.rotate_deg);
-    f(Param{.name = "translate", .unit = "m", .help = "applied last"}, s.translate);
-    f(Param{.name = "up_axis", .help = "up axis of the source; `y` (most meshes) is turned to Rime's z-up"}, s.up_axis);
+    f(Param{.name = "translate", .unit = "m", .help = "applied last", .flag = "--translate"}, s.translate);
+    f(Param{.name = "up_axis", .help = "up axis of the source; `y` (most meshes) is turned to Rime's z-up", .flag = "--up-axis"},
+      s.up_axis);
   }
 };
 
@@ -447,7 +457,10 @@ struct SolidObject {
     f(Param{.name = "minor_radius", .unit = "m", .range = Range::Positive(), .help = "torus tube radius, below `radius`"}, s.minor_radius);
     f(Param{.name = "height", .unit = "m", .range = Range::Positive(), .help = "cylinder"}, s.height);
     f(Param{.name = "container", .help = "box only: open top, walls facing inward (a tank the water sits in)"}, s.container);
-    f(Param{.name = "merge_meshes", .help = "false samples the meshes of a multi-mesh file separately (`--separate-parts`)"},
+    f(Param{.name = "merge_meshes",
+            .help = "sample all meshes of a multi-mesh file as one object; false: separately, with no welding or duplicate removal "
+                    "between them",
+            .flag = "!--separate-parts"},
       s.merge_meshes);
     f(Param{.name = "spacing_ratio",
             .unit = "d_p",

@@ -1,11 +1,11 @@
 /// @file scene_reference.h
-/// @brief The tables of docs/scene-reference.md (scene fields) and docs/tools.md (the flags that
-/// override them), generated from the settings declarations.
+/// @brief The tables of docs/scene-reference.md (scene fields), docs/tools.md (the flags that
+/// override them) and docs/farm.md (`[farm]`), generated from the settings declarations.
 ///
 /// A page marks each generated table with `<!-- generated: [name] -->` above and
 /// `<!-- end generated -->` below; everything else on the page is written by hand.
-/// `rime-scene-reference docs/scene-reference.md docs/tools.md` rewrites the tables, and the io
-/// tests fail while a page and the declarations disagree.
+/// `rime-scene-reference docs/scene-reference.md docs/tools.md docs/farm.md` rewrites the tables,
+/// and the io tests fail while a page and the declarations disagree.
 #pragma once
 
 #include <string>

@@ -58,6 +58,8 @@ class TomlReader {
   /// A single number (uniform) or a 3-vector.
   Vec3d ScalarOrVector(const std::string& key, const Vec3d& fallback, Range range = Range::Any());
   std::vector<std::string> StringList(const std::string& key, const std::vector<std::string>& allowed = {});
+  /// Fails "'value' is not <accepted>" unless `pattern` (ECMAScript) matches all of `value`.
+  void CheckPattern(const std::string& key, const std::string& value, std::string_view pattern, std::string_view accepted) const;
   /// Sub-table (empty reader if absent).
   TomlReader Table(const std::string& key);
   /// Array of tables `[[key]]`.

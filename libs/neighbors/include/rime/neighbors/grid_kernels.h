@@ -339,12 +339,21 @@ struct BoundsComponents {
 }  // namespace kernels
 }  // namespace rime::neighbors
 
-#define RIME_NEIGHBORS_KERNELS(X)                                                                                                      \
-  X(rime::neighbors::kernels::CellKeys<float>)                                                                                         \
-  X(rime::neighbors::kernels::CellKeys<double>) X(rime::neighbors::kernels::MarkCellStarts) X(rime::neighbors::kernels::InsertCells)   \
-      X(rime::neighbors::kernels::CountNeighbors<float>) X(rime::neighbors::kernels::CountNeighbors<double>)                           \
-          X(rime::neighbors::kernels::FillNeighbors<float>) X(rime::neighbors::kernels::FillNeighbors<double>)                         \
-              X(rime::neighbors::kernels::BoundsComponents<float>) X(rime::neighbors::kernels::BoundsComponents<double>)               \
-                  X(rime::neighbors::kernels::CountNeighborsByCell<float>) X(rime::neighbors::kernels::CountNeighborsByCell<double>)   \
-                      X(rime::neighbors::kernels::FillNeighborsByCell<float>) X(rime::neighbors::kernels::FillNeighborsByCell<double>) \
-                          X(rime::neighbors::kernels::PairValues<float>) X(rime::neighbors::kernels::PairValues<double>)
+// One kernel per line: clang-format 14 keeps that layout but rewraps a line of several on every run.
+#define RIME_NEIGHBORS_KERNELS(X)                           \
+  X(rime::neighbors::kernels::CellKeys<float>)              \
+  X(rime::neighbors::kernels::CellKeys<double>)             \
+  X(rime::neighbors::kernels::MarkCellStarts)               \
+  X(rime::neighbors::kernels::InsertCells)                  \
+  X(rime::neighbors::kernels::CountNeighbors<float>)        \
+  X(rime::neighbors::kernels::CountNeighbors<double>)       \
+  X(rime::neighbors::kernels::FillNeighbors<float>)         \
+  X(rime::neighbors::kernels::FillNeighbors<double>)        \
+  X(rime::neighbors::kernels::BoundsComponents<float>)      \
+  X(rime::neighbors::kernels::BoundsComponents<double>)     \
+  X(rime::neighbors::kernels::CountNeighborsByCell<float>)  \
+  X(rime::neighbors::kernels::CountNeighborsByCell<double>) \
+  X(rime::neighbors::kernels::FillNeighborsByCell<float>)   \
+  X(rime::neighbors::kernels::FillNeighborsByCell<double>)  \
+  X(rime::neighbors::kernels::PairValues<float>)            \
+  X(rime::neighbors::kernels::PairValues<double>)

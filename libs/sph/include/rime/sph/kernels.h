@@ -535,16 +535,32 @@ struct MarkListed {
 }  // namespace rime::sph
 
 // Kernels of both precisions; Gather of the anisotropy (exec lists the other attribute types).
-#define RIME_SPH_KERNELS_T(X, T)                                                                                                          \
-  X(rime::sph::kernels::Density<T>)                                                                                                       \
-  X(rime::sph::kernels::Compression<T>) X(rime::sph::kernels::InitAcceleration<T>) X(rime::sph::kernels::ViscosityAcceleration<T>)        \
-      X(rime::sph::kernels::SurfaceColor<T>) X(rime::sph::kernels::SurfaceEnergy<T>) X(rime::sph::kernels::SurfaceTensionAcceleration<T>) \
-          X(rime::sph::kernels::AkinciNormal<T>) X(rime::sph::kernels::AkinciSurfaceTensionAcceleration<T>)                               \
-              X(rime::sph::kernels::AirPressureAcceleration<T>) X(rime::sph::kernels::AdvectVelocity<T>)                                  \
-                  X(rime::sph::kernels::PredictAdvection<T>) X(rime::sph::kernels::DisplacementSum<T>)                                    \
-                      X(rime::sph::kernels::PressureUpdate<T>) X(rime::sph::kernels::IntegratePressure<T>)                                \
-                          X(rime::sph::kernels::SquaredSpeed<T>) X(rime::sph::kernels::Heights<T>) X(rime::sph::kernels::CapIceVolume<T>) \
-                              X(rime::sph::kernels::Scale<T>) X(rime::sph::kernels::MoveBoundary<T>)                                      \
-                                  X(rime::sph::kernels::InsideDomain<T>) X(rime::exec::Gather<rime::freeze::Sym6<T>>)
+// One kernel per line: clang-format 14 keeps that layout but rewraps a line of several on every run.
+#define RIME_SPH_KERNELS_T(X, T)                             \
+  X(rime::sph::kernels::Density<T>)                          \
+  X(rime::sph::kernels::Compression<T>)                      \
+  X(rime::sph::kernels::InitAcceleration<T>)                 \
+  X(rime::sph::kernels::ViscosityAcceleration<T>)            \
+  X(rime::sph::kernels::SurfaceColor<T>)                     \
+  X(rime::sph::kernels::SurfaceEnergy<T>)                    \
+  X(rime::sph::kernels::SurfaceTensionAcceleration<T>)       \
+  X(rime::sph::kernels::AkinciNormal<T>)                     \
+  X(rime::sph::kernels::AkinciSurfaceTensionAcceleration<T>) \
+  X(rime::sph::kernels::AirPressureAcceleration<T>)          \
+  X(rime::sph::kernels::AdvectVelocity<T>)                   \
+  X(rime::sph::kernels::PredictAdvection<T>)                 \
+  X(rime::sph::kernels::DisplacementSum<T>)                  \
+  X(rime::sph::kernels::PressureUpdate<T>)                   \
+  X(rime::sph::kernels::IntegratePressure<T>)                \
+  X(rime::sph::kernels::SquaredSpeed<T>)                     \
+  X(rime::sph::kernels::Heights<T>)                          \
+  X(rime::sph::kernels::CapIceVolume<T>)                     \
+  X(rime::sph::kernels::Scale<T>)                            \
+  X(rime::sph::kernels::MoveBoundary<T>)                     \
+  X(rime::sph::kernels::InsideDomain<T>)                     \
+  X(rime::exec::Gather<rime::freeze::Sym6<T>>)
 
-#define RIME_SPH_KERNELS(X) RIME_SPH_KERNELS_T(X, float) RIME_SPH_KERNELS_T(X, double) X(rime::sph::kernels::MarkListed)
+#define RIME_SPH_KERNELS(X)     \
+  RIME_SPH_KERNELS_T(X, float)  \
+  RIME_SPH_KERNELS_T(X, double) \
+  X(rime::sph::kernels::MarkListed)
