@@ -114,8 +114,12 @@ int main(int argc, char** argv) {
       // A frame without ice may have no mesh; one with ice and no mesh is not cleaned yet and would read as "no ice".
       const auto& phase = frame.Get<std::uint8_t>("phase");
       if (!has_mesh && std::find(phase.begin(), phase.end(), std::uint8_t(io::Phase::kIce)) != phase.end()) {
-        log::Warn("frame {}: {} is missing (not cleaned yet?); frame skipped", f, mesh_file.string());
-        continue;
+        // rime-bake does not clean an empty surface: ice too small to survive the level-set filters.
+        const fs::path surfaced = io::FramePath(out / "surface", "ice", f, "obj");
+        if (raw || !fs::exists(surfaced) || io::ReadMesh(surfaced).triangle_count() > 0) {
+          log::Warn("frame {}: {} is missing (not cleaned yet?); frame skipped", f, mesh_file.string());
+          continue;
+        }
       }
       const io::TriMesh mesh = has_mesh ? io::ReadMesh(mesh_file) : io::TriMesh{};
       const clean::IceMetrics m = clean::MeasureIce(mesh, frame, scene.solver.gravity, objects, settings);
