@@ -19,7 +19,7 @@ set(RIME_TEST_TMPDIR_PROPERTIES ENVIRONMENT_MODIFICATION TMPDIR=set:${RIME_TEST_
 
 # Every test carries exactly one of these labels: `unit` (fast and self-contained: the inner loop,
 # `ctest -L unit`), `slow` (long simulations, real multi-stage bakes, a local cluster) or
-# `validation` (figures against analytic or measured references). docs/testing.md describes them.
+# `validation` (figures against analytic or measured references). docs/design.md ("Tests") describes them.
 set(RIME_TEST_KINDS unit slow validation)
 
 function(rime_require_test_kind caller kind)

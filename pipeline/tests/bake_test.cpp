@@ -128,8 +128,9 @@ TEST_F(Bake, FirstRunBakesEverythingAndSecondRunExecutesNothing) {
   EXPECT_TRUE(fs::exists(Out() / "cache/.rime-bake/state.json"));
   EXPECT_TRUE(fs::is_empty(Out() / "cache/.rime-bake/incomplete"));
   EXPECT_NE(output_.find("clean"), std::string::npos) << "summary table expected:\n" << output_;
-  if (std::system("command -v blender > /dev/null 2>&1") != 0)
+  if (std::system("command -v blender > /dev/null 2>&1") != 0) {
     EXPECT_NE(output_.find("preview stage skipped: blender is not on PATH"), std::string::npos) << output_;
+  }
 
   ASSERT_EQ(RunBake(), 0) << output_;
   EXPECT_TRUE(Invocations().empty()) << output_;

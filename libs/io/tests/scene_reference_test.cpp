@@ -19,10 +19,11 @@ TEST(SceneReference, DocsTablesMatchTheDeclarations) {
     std::stringstream page;
     page << std::ifstream(path, std::ios::binary).rdbuf();
     ASSERT_FALSE(page.str().empty()) << path;
-    for (const ReferenceTable& table : SceneReferenceTables())
-      if (table.page == name)
-        EXPECT_NE(page.str().find("<!-- generated: [" + table.section + "] -->"), std::string::npos)
-            << path << " has no generated table [" << table.section << "]";
+    for (const ReferenceTable& table : SceneReferenceTables()) {
+      if (table.page != name) continue;
+      EXPECT_NE(page.str().find("<!-- generated: [" + table.section + "] -->"), std::string::npos)
+          << path << " has no generated table [" << table.section << "]";
+    }
     EXPECT_TRUE(UpdateReferenceTables(page.str()) == page.str())
         << path << " disagrees with the declarations: run "
         << "`build/rime/bin/rime-scene-reference docs/scene-reference.md docs/tools.md docs/farm.md`";
