@@ -7,7 +7,6 @@
 #include <algorithm>
 #include <cstdio>
 
-#include "rime/boundary/object.h"
 #include "rime/clean/clean.h"
 #include "rime/clean/ice_metrics.h"
 #include "rime/exec/device.h"
@@ -15,6 +14,7 @@
 #include "rime/sph/simulation.h"
 #include "rime/surface/frame_input.h"
 #include "rime/surface/reconstruct.h"
+#include "rime/test/scene_solids.h"
 
 namespace rime {
 namespace {
@@ -27,11 +27,7 @@ struct Drips {
 /// The last frame of the scene, simulated as rime-sim does.
 io::ParticleFrame Bake(const io::Scene& scene) {
   sph::Simulation<float> sim(scene, exec::Device::Cpu());
-  boundary::BoundarySettings settings;
-  settings.particle_spacing = scene.fluid.spacing;
-  for (std::size_t i = 0; i < scene.solids.size(); ++i)
-    sim.AddBoundaryObject(boundary::ToParticleFrame(boundary::BuildBoundaryObject(scene.solids[i], std::uint32_t(i), {}, settings)),
-                          scene.solids[i].name);
+  test::AddSceneSolids(sim, scene);
   sim.Initialize();
   while (sim.time() < scene.info.end_time - 1e-9) sim.Step(sim.NextTimeStep(scene.info.end_time));
   return sim.Snapshot(0);

@@ -107,9 +107,7 @@ int Run(const Options& opt, const tool::CommonOptions& common) {
     scene_hash = scene.hash;
     io::FluidSettings water = scene.fluid;
     opt.water.ApplyTo(water);
-    settings.particle_spacing = water.spacing;
-    settings.smoothing_ratio = water.smoothing_ratio;
-    settings.rest_density = scene.fluid.rest_density;
+    settings.UseWater(water);
     if (scene.solids.empty()) log::Warn("{} has no [[solid]]: nothing to sample", input.string());
     Progress progress("solids", Index(scene.solids.size()));
     for (std::size_t k = 0; k < scene.solids.size(); ++k) {
@@ -132,8 +130,7 @@ int Run(const Options& opt, const tool::CommonOptions& common) {
     opt.solid.ApplyTo(solid);
     io::FluidSettings water;
     opt.water.ApplyTo(water);
-    settings.particle_spacing = water.spacing;
-    settings.smoothing_ratio = water.smoothing_ratio;
+    settings.UseWater(water);
     if (output.extension() != ".h5part") throw Error(ExitCode::kUsage, "the output of a single mesh is a .h5part file", output.string());
     objects.emplace_back(boundary::BuildBoundaryObject(solid, opt.object_id, input, settings), output);
   }

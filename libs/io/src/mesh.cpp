@@ -209,48 +209,32 @@ std::size_t PlyTypeSize(PlyType t) {
   return 0;
 }
 
+// memcpy: PLY values are packed, so a pointer cast would read misaligned.
+template <class T>
+double Load(const char* p) {
+  T v;
+  std::memcpy(&v, p, sizeof v);
+  return double(v);
+}
+
 double ReadBinary(const char* p, PlyType t) {
   switch (t) {
-    case PlyType::kInt8: {
-      std::int8_t v;
-      std::memcpy(&v, p, 1);
-      return v;
-    }
-    case PlyType::kUint8: {
-      std::uint8_t v;
-      std::memcpy(&v, p, 1);
-      return v;
-    }
-    case PlyType::kInt16: {
-      std::int16_t v;
-      std::memcpy(&v, p, 2);
-      return v;
-    }
-    case PlyType::kUint16: {
-      std::uint16_t v;
-      std::memcpy(&v, p, 2);
-      return v;
-    }
-    case PlyType::kInt32: {
-      std::int32_t v;
-      std::memcpy(&v, p, 4);
-      return v;
-    }
-    case PlyType::kUint32: {
-      std::uint32_t v;
-      std::memcpy(&v, p, 4);
-      return v;
-    }
-    case PlyType::kFloat32: {
-      float v;
-      std::memcpy(&v, p, 4);
-      return v;
-    }
-    case PlyType::kFloat64: {
-      double v;
-      std::memcpy(&v, p, 8);
-      return v;
-    }
+    case PlyType::kInt8:
+      return Load<std::int8_t>(p);
+    case PlyType::kUint8:
+      return Load<std::uint8_t>(p);
+    case PlyType::kInt16:
+      return Load<std::int16_t>(p);
+    case PlyType::kUint16:
+      return Load<std::uint16_t>(p);
+    case PlyType::kInt32:
+      return Load<std::int32_t>(p);
+    case PlyType::kUint32:
+      return Load<std::uint32_t>(p);
+    case PlyType::kFloat32:
+      return Load<float>(p);
+    case PlyType::kFloat64:
+      return Load<double>(p);
   }
   return 0;
 }

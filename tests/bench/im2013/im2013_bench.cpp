@@ -30,7 +30,7 @@
 #include <zlib.h>
 #endif
 
-#include "rime/boundary/object.h"
+#include "rime/test/scene_solids.h"
 #include "rime/core/error.h"
 #include "rime/core/log.h"
 #include "rime/exec/device.h"
@@ -259,14 +259,7 @@ Result Run(const std::string& which, const Variant& v, bool full, const fs::path
   const io::Scene scene = io::ParseScene(SceneText(which, v, full), "compare_" + which + ".toml");
   const double dp = scene.fluid.spacing;
   sph::Simulation<float> sim(scene, exec::Device::Cpu());
-  for (std::size_t k = 0; k < scene.solids.size(); ++k) {
-    boundary::BoundarySettings settings;
-    settings.particle_spacing = dp;
-    settings.smoothing_ratio = scene.fluid.smoothing_ratio;
-    settings.rest_density = scene.fluid.rest_density;
-    sim.AddBoundaryObject(boundary::ToParticleFrame(boundary::BuildBoundaryObject(scene.solids[k], std::uint32_t(k), {}, settings)),
-                          scene.solids[k].name);
-  }
+  test::AddSceneSolids(sim, scene);
   sim.Initialize();
   r.water_initial = sim.fluid_count();
   const auto start = std::chrono::steady_clock::now();

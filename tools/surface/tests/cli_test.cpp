@@ -13,6 +13,7 @@
 #include "rime/io/mesh.h"
 #include "rime/io/particles.h"
 #include "rime/test/files.h"
+#include "rime/test/run_command.h"
 #include "rime/test/temp_folder.h"
 
 namespace {
@@ -20,18 +21,9 @@ namespace {
 namespace fs = std::filesystem;
 const std::string kTool = std::string(RIME_BINARY_DIR) + "/bin/rime-surface";
 
-struct RunResult {
-  int code = 0;
-  std::string output;
-};
+using RunResult = rime::test::CommandResult;
 
-RunResult Execute(const std::string& args) {
-  // One log per process: ctest runs tests in parallel, and CI runs may overlap.
-  static const rime::test::TempFolder logs("surface_cli_log");
-  const fs::path log = logs / "rime-surface.log";
-  const int status = std::system((kTool + " " + args + " > " + log.string() + " 2>&1").c_str());
-  return {WEXITSTATUS(status), rime::test::ReadFile(log)};
-}
+RunResult Execute(const std::string& args) { return rime::test::RunCommand(kTool + " " + args); }
 
 // A ball of ice (with stored isotropic anisotropy unless `anisotropy` is false) and a ball of water.
 rime::io::ParticleFrame MakeFrame(std::int64_t number, bool ice, bool anisotropy = true) {

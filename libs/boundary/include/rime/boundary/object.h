@@ -31,6 +31,13 @@ struct BoundarySettings {
   /// Called once per object before sampling allocates, with the mesh's triangles and the particles
   /// estimated from its area (a procedural shape: before it is tessellated); may throw to refuse.
   std::function<void(double triangles, double particles, const std::string& where)> before_sampling;
+
+  /// The spacing, smoothing ratio and rest density of the scene's `[water]`, which the boundary follows.
+  void UseWater(const io::FluidSettings& water) {
+    particle_spacing = water.spacing;
+    smoothing_ratio = water.smoothing_ratio;
+    rest_density = water.rest_density;
+  }
 };
 
 struct BoundaryObject {
