@@ -4,7 +4,7 @@
 function(rime_target_defaults target)
   target_compile_options(${target} PRIVATE
     $<$<COMPILE_LANGUAGE:CXX>:-Wall -Wextra -Wno-unused-parameter>
-    $<$<AND:$<COMPILE_LANGUAGE:CXX>,$<BOOL:${RIME_NATIVE}>>:-march=native>
+    $<$<AND:$<COMPILE_LANGUAGE:CXX>,$<BOOL:${RIME_ARCH}>>:-march=${RIME_ARCH}>
     $<$<COMPILE_LANGUAGE:CUDA>:--expt-relaxed-constexpr --extended-lambda -Xcudafe --diag_suppress=20012>)
 endfunction()
 
