@@ -4,10 +4,12 @@
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_reduce.h>
+#include <tbb/task_arena.h>
 
 #include <bit>
 #include <cmath>
 #include <limits>
+#include <mutex>
 #include <vector>
 
 #if defined(__AVX2__)
@@ -51,10 +53,45 @@ void CpuBounds(const Vec3<T>* points, Index n, Vec3<T>& lo, Vec3<T>& hi) {
   hi = box.finite ? box.hi : Vec3<T>(nan, nan, nan);
 }
 
+// The up to 27 occupied target cells around one query cell, in the kernels' order (the ranges
+// kernels::CellNeighborhood finds): read from the target's dense box where it has one, three
+// neighbouring words per row, instead of probing each cell around the cell's centre.
+template <class T>
+int NeighborCells(const GridView<T>& target, const GridView<T>& source, std::uint32_t cell, std::uint32_t (&begin)[27],
+                  std::uint32_t (&end)[27]) {
+  if (!target.dense_cells) {
+    const kernels::CellNeighborhood<T> hood(target, source, cell);
+    std::copy_n(hood.begin, hood.count, begin);
+    std::copy_n(hood.end, hood.count, end);
+    return hood.count;
+  }
+  const Vec3<T> p = source.points[source.sorted_index[source.cell_start[cell]]];
+  const std::int64_t cx = source.CellCoord(p.x, source.origin.x) - target.dense_lo[0];
+  const std::int64_t cy = source.CellCoord(p.y, source.origin.y) - target.dense_lo[1];
+  const std::int64_t cz = source.CellCoord(p.z, source.origin.z) - target.dense_lo[2];
+  int count = 0;
+  for (std::int64_t z = cz - 1; z <= cz + 1; ++z) {
+    if (z < 0 || z >= target.dense_dims[2]) continue;
+    for (std::int64_t y = cy - 1; y <= cy + 1; ++y) {
+      if (y < 0 || y >= target.dense_dims[1]) continue;
+      const std::uint32_t* row = target.dense_cells + (z * target.dense_dims[1] + y) * target.dense_dims[0];
+      for (std::int64_t x = std::max<std::int64_t>(cx - 1, 0), x_end = std::min(cx + 2, target.dense_dims[0]); x < x_end; ++x) {
+        const std::uint32_t t = row[x];
+        if (t == GridView<T>::kNoCell) continue;
+        begin[count] = target.cell_start[t];
+        end[count] = target.cell_start[t + 1];
+        ++count;
+      }
+    }
+  }
+  return count;
+}
+
 // The candidates of one query cell (the points of its up to 27 neighbor cells, in the order the
-// kernels visit them) as padded structure-of-arrays, and one query point's matches. Padding
-// points lie far away, so blocks of kLanes candidates need no tail handling.
+// kernels visit them) as padded structure-of-arrays. Padding points lie far away, so blocks of
+// kLanes candidates need no tail handling.
 constexpr int kLanes = 8;
+constexpr std::size_t kStagedBlock = std::size_t(1) << 16;  // matches per block of the first pass's buffers
 
 #if defined(__AVX2__)
 // Left-packing permutations: row m moves the lanes whose bit is set in m to the front.
@@ -69,6 +106,42 @@ struct LeftPackTable {
   }
 };
 constexpr LeftPackTable kLeftPack;
+
+typedef float FloatBlock __attribute__((vector_size(32)));
+
+/// W and ∇W of kLanes pairs of offsets (x, y, z): the values of kernels::PairValues, bit for bit.
+/// W's and B''s pieces are clamped instead of branched on (a clamped piece is exactly zero), and
+/// every operation rounds as the compiled scalar kernel does: q is rounded before use (the barrier
+/// stops it being fused into 2 − q), the cubes and squares are rounded, and only the last term of
+/// B and B' is fused. CpuQueryGridMatchesTheKernelsExactly checks it.
+struct PairBlock {
+  FloatBlock w, gx, gy, gz;
+};
+inline PairBlock KernelValues(FloatBlock x, FloatBlock y, FloatBlock z, const CubicSpline<float>& kernel) {
+  const FloatBlock zero{}, one = zero + 1.0f, two = zero + 2.0f, tiny = zero + 1e-9f * kernel.h;
+  const FloatBlock len = FloatBlock(_mm256_sqrt_ps(__m256(x * x + y * y + z * z)));
+  FloatBlock q = len * kernel.inv_h;
+  asm("" : "+x"(q));
+  const FloatBlock a = q < two ? two - q : zero, b = q < one ? one - q : zero;
+  const FloatBlock cube = a * a * a, b4 = 4.0f * b * b, a3 = -3.0f * a * a, b12 = 12.0f * b;
+  const FloatBlock shape = FloatBlock(_mm256_fnmadd_ps(__m256(b4), __m256(b), __m256(cube)));
+  const FloatBlock derivative = FloatBlock(_mm256_fmadd_ps(__m256(b12), __m256(b), __m256(a3)));
+  const FloatBlock factor = len < tiny ? zero : kernel.grad_norm * derivative / len;
+  return {kernel.w_norm * shape, x * factor, y * factor, z * factor};
+}
+
+/// Stores kLanes vectors given by their components as 3 kLanes consecutive floats (x0 y0 z0 x1 ...).
+inline void StoreInterleaved(FloatBlock x, FloatBlock y, FloatBlock z, float* out) {
+  const __m256 xy = _mm256_shuffle_ps(__m256(x), __m256(y), _MM_SHUFFLE(2, 0, 2, 0));  // x0 x2 y0 y2 | x4 x6 y4 y6
+  const __m256 yz = _mm256_shuffle_ps(__m256(y), __m256(z), _MM_SHUFFLE(3, 1, 3, 1));  // y1 y3 z1 z3 | y5 y7 z5 z7
+  const __m256 zx = _mm256_shuffle_ps(__m256(z), __m256(x), _MM_SHUFFLE(3, 1, 2, 0));  // z0 z2 x1 x3 | z4 z6 x5 x7
+  const __m256 v03 = _mm256_shuffle_ps(xy, zx, _MM_SHUFFLE(2, 0, 2, 0));               // x0 y0 z0 x1 | x4 y4 z4 x5
+  const __m256 v14 = _mm256_shuffle_ps(yz, xy, _MM_SHUFFLE(3, 1, 2, 0));               // y1 z1 x2 y2 | y5 z5 x6 y6
+  const __m256 v25 = _mm256_shuffle_ps(zx, yz, _MM_SHUFFLE(3, 1, 3, 1));               // z2 x3 y3 z3 | z6 x7 y7 z7
+  _mm256_storeu_ps(out, _mm256_permute2f128_ps(v03, v14, 0x20));
+  _mm256_storeu_ps(out + 8, _mm256_permute2f128_ps(v25, v03, 0x30));
+  _mm256_storeu_ps(out + 16, _mm256_permute2f128_ps(v14, v25, 0x31));
+}
 #endif
 
 template <class T>
@@ -76,66 +149,96 @@ struct CellCandidates {
   std::vector<T> x, y, z;
   std::vector<std::uint32_t> j;
   std::size_t count = 0, padded = 0;
-  std::vector<std::uint32_t> match_j;  // kLanes longer than the candidates: whole blocks are stored
-  std::vector<T> rx, ry, rz;
 
-  void Gather(const GridView<T>& target, const GridView<T>& source, std::uint32_t cell) {
-    const kernels::CellNeighborhood<T> hood(target, source, cell);
+  /// `in_order`: the target's sorted slot k holds point k, so a cell's points are read as a block.
+  void Gather(const GridView<T>& target, const GridView<T>& source, std::uint32_t cell, bool in_order) {
+    std::uint32_t begin[27], end[27];
+    const int cells = NeighborCells(target, source, cell, begin, end);
     count = 0;
-    for (int k = 0; k < hood.count; ++k) count += hood.end[k] - hood.begin[k];
+    for (int k = 0; k < cells; ++k) count += end[k] - begin[k];
     padded = (count + kLanes - 1) / kLanes * kLanes;
-    if (x.size() < padded) {
-      for (auto* a : {&x, &y, &z}) a->resize(padded);
-      j.resize(padded);
-      match_j.resize(padded + kLanes);
-      for (auto* a : {&rx, &ry, &rz}) a->resize(padded + kLanes);
+    if (x.size() < padded + kLanes) {
+      for (auto* a : {&x, &y, &z}) a->resize(padded + kLanes);
+      j.resize(padded + kLanes);
     }
+    T* const px = x.data();
+    T* const py = y.data();
+    T* const pz = z.data();
+    std::uint32_t* const pj = j.data();
     std::size_t c = 0;
-    for (int k = 0; k < hood.count; ++k)
-      for (std::uint32_t t = hood.begin[k]; t < hood.end[k]; ++t, ++c) {
-        const std::uint32_t idx = target.sorted_index[t];
-        const Vec3<T> p = target.points[idx];
-        x[c] = p.x, y[c] = p.y, z[c] = p.z, j[c] = idx;
-      }
-    const T far = std::numeric_limits<T>::max() / 4;  // its squared distance overflows to +inf: never a neighbor
-    for (; c < padded; ++c) x[c] = y[c] = z[c] = far, j[c] = 0;
-  }
-
-  /// What Match keeps of the candidates within range: their number only, their indices (into
-  /// match_j), or also their offsets r = q − x_j (into rx, ry, rz).
-  enum class Keep { kCount, kIndices, kOffsets };
-
-  /// The number of candidates within sqrt(r2max) of q, except `self`, keeping what `kKeep` says.
-  /// The squared distance is the kernels' Dot(r, r) expression, so exactly the same pairs are found.
-  template <Keep kKeep>
-  std::size_t Match(const Vec3<T>& q, T r2max, std::uint32_t self) {
+    bool gathered = false;
 #if defined(__AVX2__)
     if constexpr (std::is_same_v<T, float>) {
-      typedef float Block __attribute__((vector_size(32)));
-      const Block qx = q.x - Block{}, qy = q.y - Block{}, qz = q.z - Block{};
+      if (in_order) {
+        gathered = true;
+        // kLanes points at a time, de-interleaved; a cell's last block may run past its end (into
+        // slots the next cell overwrites) but not past the last point.
+        const float* base = &target.points[0].x;
+        const __m256i lanes = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+        for (int k = 0; k < cells; ++k) {
+          std::uint32_t t = begin[k];
+          for (; t < end[k] && t + kLanes <= target.count; t += kLanes, c += kLanes) {
+            const __m256 m0 = _mm256_loadu_ps(base + 3 * std::size_t(t)), m1 = _mm256_loadu_ps(base + 3 * std::size_t(t) + 8),
+                         m2 = _mm256_loadu_ps(base + 3 * std::size_t(t) + 16);
+            const __m256 v03 = _mm256_permute2f128_ps(m0, m1, 0x30);                 // x0 y0 z0 x1 | x4 y4 z4 x5
+            const __m256 v14 = _mm256_permute2f128_ps(m0, m2, 0x21);                 // y1 z1 x2 y2 | y5 z5 x6 y6
+            const __m256 v25 = _mm256_permute2f128_ps(m1, m2, 0x30);                 // z2 x3 y3 z3 | z6 x7 y7 z7
+            const __m256 xy = _mm256_shuffle_ps(v14, v25, _MM_SHUFFLE(2, 1, 3, 2));  // x2 y2 x3 y3
+            const __m256 yz = _mm256_shuffle_ps(v03, v14, _MM_SHUFFLE(1, 0, 2, 1));  // y0 z0 y1 z1
+            _mm256_storeu_ps(px + c, _mm256_shuffle_ps(v03, xy, _MM_SHUFFLE(2, 0, 3, 0)));
+            _mm256_storeu_ps(py + c, _mm256_shuffle_ps(yz, xy, _MM_SHUFFLE(3, 1, 2, 0)));
+            _mm256_storeu_ps(pz + c, _mm256_shuffle_ps(yz, v25, _MM_SHUFFLE(3, 0, 3, 1)));
+            _mm256_storeu_si256(reinterpret_cast<__m256i*>(pj + c), _mm256_add_epi32(_mm256_set1_epi32(int(t)), lanes));
+          }
+          if (t > end[k]) c -= t - end[k];  // the overrun
+          for (; t < end[k]; ++t, ++c) {
+            const Vec3<T> p = target.points[t];
+            px[c] = p.x, py[c] = p.y, pz[c] = p.z, pj[c] = t;
+          }
+        }
+      }
+    }
+#endif
+    if (!gathered)
+      for (int k = 0; k < cells; ++k)
+        for (std::uint32_t t = begin[k]; t < end[k]; ++t, ++c) {
+          const std::uint32_t idx = target.sorted_index[t];
+          const Vec3<T> p = target.points[idx];
+          px[c] = p.x, py[c] = p.y, pz[c] = p.z, pj[c] = idx;
+        }
+    const T far = std::numeric_limits<T>::max() / 4;  // its squared distance overflows to +inf: never a neighbor
+    for (; c < padded; ++c) px[c] = py[c] = pz[c] = far, pj[c] = 0;
+  }
+
+  /// Writes the indices of the candidates within sqrt(r2max) of q, except `self` (if kSkipSelf), to
+  /// `out` (room for kLanes more than the candidates: whole blocks are stored) and returns their
+  /// number. The squared distance is the kernels' Dot(r, r) expression, so exactly the same pairs
+  /// are found.
+  template <bool kSkipSelf>
+  std::size_t Match(const Vec3<T>& q, T r2max, std::uint32_t self, std::uint32_t* out) const {
+    const T* const px = x.data();
+    const T* const py = y.data();
+    const T* const pz = z.data();
+    const std::uint32_t* const pj = j.data();
+#if defined(__AVX2__)
+    if constexpr (std::is_same_v<T, float>) {
+      const FloatBlock qx = q.x - FloatBlock{}, qy = q.y - FloatBlock{}, qz = q.z - FloatBlock{};
       const __m256 limit = _mm256_set1_ps(r2max);
       const __m256i self_id = _mm256_set1_epi32(int(self));
       std::size_t k = 0;
       for (std::size_t c = 0; c < padded; c += kLanes) {
-        Block bx, by, bz;
-        __builtin_memcpy(&bx, &x[c], sizeof bx);
-        __builtin_memcpy(&by, &y[c], sizeof by);
-        __builtin_memcpy(&bz, &z[c], sizeof bz);
-        const Block dx = qx - bx, dy = qy - by, dz = qz - bz;
-        const Block d2 = dx * dx + dy * dy + dz * dz;
-        const __m256i ids = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(&j[c]));
-        const __m256 is_self = _mm256_castsi256_ps(_mm256_cmpeq_epi32(ids, self_id));
-        const int mask = _mm256_movemask_ps(_mm256_andnot_ps(is_self, _mm256_cmp_ps(__m256(d2), limit, _CMP_LT_OQ)));
-        if constexpr (kKeep != Keep::kCount) {
-          if (mask == 0) continue;
-          const __m256i pack = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(kLeftPack.lanes[mask]));
-          _mm256_storeu_si256(reinterpret_cast<__m256i*>(&match_j[k]), _mm256_permutevar8x32_epi32(ids, pack));
-          if constexpr (kKeep == Keep::kOffsets) {
-            _mm256_storeu_ps(&rx[k], _mm256_permutevar8x32_ps(__m256(dx), pack));
-            _mm256_storeu_ps(&ry[k], _mm256_permutevar8x32_ps(__m256(dy), pack));
-            _mm256_storeu_ps(&rz[k], _mm256_permutevar8x32_ps(__m256(dz), pack));
-          }
-        }
+        FloatBlock bx, by, bz;
+        __builtin_memcpy(&bx, px + c, sizeof bx);
+        __builtin_memcpy(&by, py + c, sizeof by);
+        __builtin_memcpy(&bz, pz + c, sizeof bz);
+        const FloatBlock dx = qx - bx, dy = qy - by, dz = qz - bz;
+        const FloatBlock d2 = dx * dx + dy * dy + dz * dz;
+        __m256 within = _mm256_cmp_ps(__m256(d2), limit, _CMP_LT_OQ);
+        const __m256i ids = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(pj + c));
+        if constexpr (kSkipSelf) within = _mm256_andnot_ps(_mm256_castsi256_ps(_mm256_cmpeq_epi32(ids, self_id)), within);
+        const int mask = _mm256_movemask_ps(within);
+        const __m256i pack = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(kLeftPack.lanes[mask]));
+        _mm256_storeu_si256(reinterpret_cast<__m256i*>(out + k), _mm256_permutevar8x32_epi32(ids, pack));
         k += std::size_t(__builtin_popcount(unsigned(mask)));
       }
       return k;
@@ -143,61 +246,81 @@ struct CellCandidates {
 #endif
     std::size_t k = 0;
     for (std::size_t c = 0; c < count; ++c) {
-      const Vec3<T> r(q.x - x[c], q.y - y[c], q.z - z[c]);
-      if constexpr (kKeep != Keep::kCount) match_j[k] = j[c];
-      if constexpr (kKeep == Keep::kOffsets) rx[k] = r.x, ry[k] = r.y, rz[k] = r.z;
-      k += (Dot(r, r) < r2max) & (j[c] != self);  // branch-free: store always, advance on a match
+      const Vec3<T> r(q.x - px[c], q.y - py[c], q.z - pz[c]);
+      out[k] = pj[c];
+      k += (Dot(r, r) < r2max) & (!kSkipSelf || pj[c] != self);  // branch-free: store always, advance on a match
     }
     return k;
   }
-
-  /// W and ∇W of the first `found` matches kept with Keep::kOffsets: the values of
-  /// kernels::PairValues, bit for bit. With AVX2, kLanes pairs at a time: W's and B''s pieces are
-  /// clamped instead of branched on (a clamped piece is exactly zero), and every operation rounds
-  /// as the compiled scalar kernel does: q is rounded before use (the barrier stops it being
-  /// fused into 2 − q), the cubes and squares are rounded, and only the last term of B and B' is
-  /// fused. CpuQueryGridMatchesTheKernelsExactly checks it.
-  void Values(std::size_t found, const CubicSpline<T>& kernel, T* w, Vec3<T>* grad) {
-#if defined(__AVX2__)
-    if constexpr (std::is_same_v<T, float>) {
-      typedef float Block __attribute__((vector_size(32)));
-      const Block zero{}, one = zero + T(1), two = zero + T(2), tiny = zero + T(1e-9) * kernel.h;
-      T wk[kLanes], gx[kLanes], gy[kLanes], gz[kLanes];
-      for (std::size_t k = 0; k < found; k += kLanes) {
-        Block x, y, z;
-        __builtin_memcpy(&x, &rx[k], sizeof x);
-        __builtin_memcpy(&y, &ry[k], sizeof y);
-        __builtin_memcpy(&z, &rz[k], sizeof z);
-        const Block len = Block(_mm256_sqrt_ps(__m256(x * x + y * y + z * z)));
-        Block q = len * kernel.inv_h;
-        asm("" : "+x"(q));
-        const Block a = q < two ? two - q : zero, b = q < one ? one - q : zero;
-        const Block cube = a * a * a, b4 = T(4) * b * b, a3 = T(-3) * a * a, b12 = T(12) * b;
-        const Block shape = Block(_mm256_fnmadd_ps(__m256(b4), __m256(b), __m256(cube)));
-        const Block derivative = Block(_mm256_fmadd_ps(__m256(b12), __m256(b), __m256(a3)));
-        const Block factor = len < tiny ? zero : kernel.grad_norm * derivative / len;
-        const Block value = kernel.w_norm * shape;
-        const Block px = x * factor, py = y * factor, pz = z * factor;
-        __builtin_memcpy(wk, &value, sizeof wk);
-        __builtin_memcpy(gx, &px, sizeof gx);
-        __builtin_memcpy(gy, &py, sizeof gy);
-        __builtin_memcpy(gz, &pz, sizeof gz);
-        for (std::size_t l = 0, e = std::min<std::size_t>(kLanes, found - k); l < e; ++l) {
-          w[k + l] = wk[l];
-          grad[k + l] = Vec3<T>(gx[l], gy[l], gz[l]);
-        }
-      }
-      return;
-    }
-#endif
-    for (std::size_t k = 0; k < found; ++k) {
-      const Vec3<T> r(rx[k], ry[k], rz[k]);
-      const T len = Norm(r);
-      w[k] = kernel.W(len);
-      grad[k] = r * kernel.GradientFactor(len);
-    }
-  }
 };
+
+/// W and ∇W of the pairs (q, points[j]) for the `found` indices j: kernels::PairValues's values,
+/// r = q − x_j rounded as the list search rounds it.
+template <class T>
+void PairValuesOf(const Vec3<T>& q, const std::uint32_t* j, std::size_t found, const Vec3<T>* points, std::size_t count,
+                  const CubicSpline<T>& kernel, T* w, Vec3<T>* grad) {
+#if defined(__AVX2__)
+  if constexpr (std::is_same_v<T, float>) {
+    static_assert(sizeof(Vec3<T>) == 3 * sizeof(T));
+    const float* base = &points[0].x;
+    const FloatBlock qx = q.x - FloatBlock{}, qy = q.y - FloatBlock{}, qz = q.z - FloatBlock{};
+    const std::uint32_t last = std::uint32_t(count - 1);
+    for (std::size_t k = 0; k < found; k += kLanes) {
+      const std::size_t live = std::min<std::size_t>(kLanes, found - k);
+      // Lanes past the end read point 0. Each point is read as 4 floats, so a block holding the
+      // array's last point (whose 4th float may lie past the allocation) is gathered instead.
+      std::uint32_t id[kLanes];
+      bool has_last = false;
+      for (std::size_t l = 0; l < kLanes; ++l) {
+        id[l] = l < live ? j[k + l] : 0;
+        has_last |= id[l] == last;
+      }
+      FloatBlock px, py, pz;
+      if (!has_last) {
+        const __m256 r0 = _mm256_loadu2_m128(base + 3 * std::size_t(id[4]), base + 3 * std::size_t(id[0]));
+        const __m256 r1 = _mm256_loadu2_m128(base + 3 * std::size_t(id[5]), base + 3 * std::size_t(id[1]));
+        const __m256 r2 = _mm256_loadu2_m128(base + 3 * std::size_t(id[6]), base + 3 * std::size_t(id[2]));
+        const __m256 r3 = _mm256_loadu2_m128(base + 3 * std::size_t(id[7]), base + 3 * std::size_t(id[3]));
+        const __m256 t0 = _mm256_unpacklo_ps(r0, r1), t1 = _mm256_unpacklo_ps(r2, r3);  // x0 x1 y0 y1, x2 x3 y2 y3
+        const __m256 t2 = _mm256_unpackhi_ps(r0, r1), t3 = _mm256_unpackhi_ps(r2, r3);  // z0 z1 . ., z2 z3 . .
+        px = FloatBlock(_mm256_shuffle_ps(t0, t1, _MM_SHUFFLE(1, 0, 1, 0)));
+        py = FloatBlock(_mm256_shuffle_ps(t0, t1, _MM_SHUFFLE(3, 2, 3, 2)));
+        pz = FloatBlock(_mm256_shuffle_ps(t2, t3, _MM_SHUFFLE(1, 0, 1, 0)));
+      } else {
+        __m256i ids;
+        __builtin_memcpy(&ids, id, sizeof ids);
+        const __m256i at = _mm256_add_epi32(_mm256_add_epi32(ids, ids), ids);
+        px = FloatBlock(_mm256_i32gather_ps(base, at, 4));
+        py = FloatBlock(_mm256_i32gather_ps(base + 1, at, 4));
+        pz = FloatBlock(_mm256_i32gather_ps(base + 2, at, 4));
+      }
+      const PairBlock v = KernelValues(qx - px, qy - py, qz - pz, kernel);
+      if (live == kLanes) {
+        _mm256_storeu_ps(w + k, __m256(v.w));
+        StoreInterleaved(v.gx, v.gy, v.gz, &grad[k].x);
+        continue;
+      }
+      float wk[kLanes], gx[kLanes], gy[kLanes], gz[kLanes];
+      __builtin_memcpy(wk, &v.w, sizeof wk);
+      __builtin_memcpy(gx, &v.gx, sizeof gx);
+      __builtin_memcpy(gy, &v.gy, sizeof gy);
+      __builtin_memcpy(gz, &v.gz, sizeof gz);
+      for (std::size_t l = 0; l < live; ++l) {
+        w[k + l] = wk[l];
+        grad[k + l] = Vec3<T>(gx[l], gy[l], gz[l]);
+      }
+    }
+    return;
+  }
+#endif
+  for (std::size_t k = 0; k < found; ++k) {
+    const Vec3<T> p = points[j[k]];
+    const Vec3<T> r(q.x - p.x, q.y - p.y, q.z - p.z);
+    const T len = Norm(r);
+    w[k] = kernel.W(len);
+    grad[k] = r * kernel.GradientFactor(len);
+  }
+}
 
 }  // namespace
 
@@ -234,6 +357,7 @@ void UniformGrid<T>::BuildImpl(const Vec3<T>* points, Index n, T cell_size, cons
   view_.inv_cell = T(1) / cell_size;
   cells_ = 0;
   dense_cells_.clear();
+  in_order_ = false;
   if (n == 0) return;
 
   // Bounding box -> origin one cell below the minimum, so every point sits in a cell >= 1.
@@ -326,6 +450,7 @@ template <class T>
 void UniformGrid<T>::AdoptOrder(const Vec3<T>* reordered_points) {
   view_.points = reordered_points;
   exec::ParallelFor(device_, view_.count, exec::IotaKernel{sorted_index_.data()});
+  in_order_ = true;
 }
 
 template <class T>
@@ -388,8 +513,10 @@ void UniformGrid<T>::QueryGrid(const UniformGrid& queries, T radius, bool exclud
                                            .grad = values.grad.data()});
 }
 
-// Two passes over the query cells, as the device kernels: count, scan, fill. Each cell copies its
-// candidates once into contiguous arrays that every point of the cell scans kLanes at a time.
+// Two passes, as the device kernels, but only the first searches: cell by cell, each cell copies its
+// candidates once into contiguous arrays that every point of the cell scans kLanes at a time, and
+// the matches are staged in blocks of the grid's pool. After the scan the second pass copies each
+// query's matches into place and computes their W and ∇W from the points they name.
 template <class T>
 void UniformGrid<T>::CpuQueryByCell(const UniformGrid& queries, T radius, bool exclude_self, NeighborList& out,
                                     const PairKernelArrays<T>* values) const {
@@ -398,26 +525,44 @@ void UniformGrid<T>::CpuQueryByCell(const UniformGrid& queries, T radius, bool e
   const T r2max = radius * radius;
   const std::size_t cells = queries.cell_count();
   static tbb::enumerable_thread_specific<CellCandidates<T>> scratch;
-  using Keep = typename CellCandidates<T>::Keep;
   out.offsets.resize(m + 1);
   counts_.resize(m + 1);
   counts_.SetZero();
-  // visit(candidates, i, self) for every query point i, its cell's candidates gathered.
-  const auto for_each_query = [&](auto&& visit) {
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, cells, 8), [&](const tbb::blocked_range<std::size_t>& range) {
-      CellCandidates<T>& cand = scratch.local();
-      for (std::size_t cell = range.begin(); cell != range.end(); ++cell) {
-        cand.Gather(target, source, std::uint32_t(cell));
-        for (std::uint32_t s = source.cell_start[cell], e = source.cell_start[cell + 1]; s < e; ++s) {
-          const std::uint32_t i = source.sorted_index[s];
-          visit(cand, i, exclude_self ? i : ~0u);
-        }
-      }
-    });
+  staged_at_.resize(std::size_t(m));
+  // Each worker fills a block at a time, taken from the grid's pool (kept between queries), so
+  // the pool holds about the pairs plus a block per worker whichever worker finds them.
+  struct Cursor {
+    std::uint32_t* block = nullptr;
+    std::size_t size = 0, used = 0;
+  };
+  std::vector<Cursor> cursors(static_cast<std::size_t>(tbb::this_task_arena::max_concurrency()));
+  std::size_t next_block = 0;
+  std::mutex pool_mutex;
+  const auto take_block = [&](std::size_t room, Cursor& at) {
+    const std::lock_guard<std::mutex> lock(pool_mutex);
+    if (next_block == staged_.size()) staged_.emplace_back(std::max(kStagedBlock, room));
+    std::vector<std::uint32_t>& block = staged_[next_block++];
+    if (block.size() < room) block.resize(room);
+    at = {block.data(), block.size(), 0};
   };
   std::uint32_t* counts = counts_.data();
-  for_each_query([&](CellCandidates<T>& cand, std::uint32_t i, std::uint32_t self) {
-    counts[i] = std::uint32_t(cand.template Match<Keep::kCount>(source.points[i], r2max, self));
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, cells, 8), [&](const tbb::blocked_range<std::size_t>& range) {
+    CellCandidates<T>& cand = scratch.local();
+    Cursor& at = cursors[std::size_t(tbb::this_task_arena::current_thread_index())];
+    for (std::size_t cell = range.begin(); cell != range.end(); ++cell) {
+      cand.Gather(target, source, std::uint32_t(cell), in_order_);
+      const std::size_t room = cand.padded + kLanes;  // what Match may store
+      for (std::uint32_t s = source.cell_start[cell], e = source.cell_start[cell + 1]; s < e; ++s) {
+        const std::uint32_t i = source.sorted_index[s];
+        if (at.size - at.used < room) take_block(room, at);
+        std::uint32_t* staged = at.block + at.used;
+        const std::size_t found = exclude_self ? cand.template Match<true>(source.points[i], r2max, i, staged)
+                                               : cand.template Match<false>(source.points[i], r2max, ~0u, staged);
+        counts[i] = std::uint32_t(found);
+        staged_at_[i] = staged;
+        at.used += found;
+      }
+    }
   });
   const std::uint64_t total = exec::ExclusiveScan(device_, counts_.data(), out.offsets.data(), m + 1);
   if (total > 0xffffffffULL) throw Error(ExitCode::kFailure, "neighbor grid: more than 2^32 neighbor pairs");
@@ -430,12 +575,14 @@ void UniformGrid<T>::CpuQueryByCell(const UniformGrid& queries, T radius, bool e
   std::uint32_t* indices = out.indices.data();
   T* w = values ? values->w.data() : nullptr;
   Vec3<T>* grad = values ? values->grad.data() : nullptr;
-  for_each_query([&](CellCandidates<T>& cand, std::uint32_t i, std::uint32_t self) {
-    const std::uint32_t first = offsets[i];
-    const std::size_t found = values ? cand.template Match<Keep::kOffsets>(source.points[i], r2max, self)
-                                     : cand.template Match<Keep::kIndices>(source.points[i], r2max, self);
-    std::copy_n(cand.match_j.data(), found, indices + first);
-    if (values) cand.Values(found, values->kernel, w + first, grad + first);
+  tbb::parallel_for(tbb::blocked_range<Index>(0, m, 256), [&](const tbb::blocked_range<Index>& range) {
+    for (Index i = range.begin(); i != range.end(); ++i) {
+      const std::uint32_t first = offsets[i], found = offsets[i + 1] - first;
+      if (found == 0) continue;
+      const std::uint32_t* matches = staged_at_[i];
+      std::copy_n(matches, found, indices + first);
+      if (values) PairValuesOf(source.points[i], matches, found, target.points, target.count, values->kernel, w + first, grad + first);
+    }
   });
 }
 

@@ -68,8 +68,8 @@ class UniformGrid {
   /// once for all points of the cell (several times faster on the CPU); identical lists either way.
   void QueryGrid(const UniformGrid& queries, T radius, bool exclude_self, NeighborList& out) const;
   /// The same, also filling `values` for every pair. On the CPU the cell-by-cell search tests
-  /// 16 candidates at a time and computes the values in the same pass; lists and values are
-  /// bit-identical to QueryGrid followed by kernels::PairValues.
+  /// 8 candidates at a time and the values are computed from its matches once they are in place;
+  /// lists and values are bit-identical to QueryGrid followed by kernels::PairValues.
   void QueryGrid(const UniformGrid& queries, T radius, bool exclude_self, NeighborList& out, const PairKernelArrays<T>& values) const;
 
  private:
@@ -90,7 +90,11 @@ class UniformGrid {
   exec::DeviceArray<std::uint32_t> table_cells_;
   exec::DeviceArray<T> bounds_scratch_;
   mutable exec::DeviceArray<std::uint32_t> counts_;
+  // CPU: blocks of the first pass's matches (kept between queries), and where each query's lie.
+  mutable std::vector<std::vector<std::uint32_t>> staged_;
+  mutable std::vector<const std::uint32_t*> staged_at_;
   std::vector<std::uint32_t> dense_cells_;  // CPU: GridView::dense_cells
+  bool in_order_ = false;                   // sorted slot k holds point k (after AdoptOrder)
 };
 
 extern template class UniformGrid<float>;
