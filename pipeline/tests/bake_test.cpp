@@ -3,7 +3,6 @@
 #include <cstdlib>
 #include <gtest/gtest.h>
 #include <signal.h>
-#include <spawn.h>
 #include <fcntl.h>
 #include <sys/file.h>
 #include <sys/stat.h>
@@ -27,7 +26,6 @@
 #include "rime/io/scene.h"
 
 namespace fs = std::filesystem;
-extern char** environ;
 
 namespace rime::bake {
 namespace {
@@ -75,6 +73,12 @@ class Bake : public ::testing::Test {
     const int status = std::system(command.c_str());
     output_ = ReadFile(root_ / "bake_output.txt");
     return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  }
+  /// Starts rime-bake (quiet) in the background, its output in `log` under the test's folder.
+  pid_t StartBake(const std::string& log) const {
+    return test::Spawn(
+        {RIME_BINARY_DIR "/bin/rime-bake", scene_.string(), "--tools", (root_ / "tools").string(), "-o", Out().string(), "-q"},
+        root_ / log);
   }
   /// Tool name -> number of invocations in the last run.
   std::map<std::string, int> Invocations() const {
@@ -313,20 +317,13 @@ TEST_F(Bake, ChangedParametersRestartTheSimulationInsteadOfResuming) {
 
 TEST_F(Bake, KilledDuringSimulationResumes) {
   setenv("FAKE_SIM_SLEEP", "0.4", 1);
-  fs::create_directories(root_);
-  const std::string bake = RIME_BINARY_DIR "/bin/rime-bake";
-  std::vector<std::string> args = {bake, scene_.string(), "--tools", (root_ / "tools").string(), "-o", Out().string(), "-q"};
-  std::vector<char*> argv;
-  for (auto& a : args) argv.push_back(a.data());
-  argv.push_back(nullptr);
-  pid_t pid = 0;
-  ASSERT_EQ(posix_spawn(&pid, bake.c_str(), nullptr, nullptr, argv.data(), environ), 0);
+  const pid_t pid = StartBake("killed.txt");
+  ASSERT_GT(pid, 0);
   const fs::path second_frame = Out() / "cache/sim/particles.0001.h5part";
   for (int k = 0; k < 200 && !fs::exists(second_frame); ++k) std::this_thread::sleep_for(std::chrono::milliseconds(50));
   ASSERT_TRUE(fs::exists(second_frame));
   kill(pid, SIGKILL);  // no chance to clean up; the fake sim dies with it (PR_SET_PDEATHSIG)
-  int status = 0;
-  waitpid(pid, &status, 0);
+  test::WaitExit(pid);
   WaitUntilUnlocked();  // its `sleep` outlives it, holding the inherited lock
   EXPECT_FALSE(fs::exists(Out() / "cache/sim/particles.0003.h5part"));
   EXPECT_TRUE(fs::exists(Out() / "cache/.rime-bake/incomplete/sim"));
@@ -418,13 +415,8 @@ TEST_F(Bake, RimeBlenderPicksTheBlenderOrTurnsPreviewsOff) {
 
 TEST_F(Bake, InterruptStopsTheBakeAndTheRerunResumes) {
   setenv("FAKE_SIM_SLEEP", "0.4", 1);
-  const std::string bake = RIME_BINARY_DIR "/bin/rime-bake";
-  std::vector<std::string> args = {bake, scene_.string(), "--tools", (root_ / "tools").string(), "-o", Out().string(), "-q"};
-  std::vector<char*> argv;
-  for (auto& a : args) argv.push_back(a.data());
-  argv.push_back(nullptr);
-  pid_t pid = 0;
-  ASSERT_EQ(posix_spawn(&pid, bake.c_str(), nullptr, nullptr, argv.data(), environ), 0);
+  const pid_t pid = StartBake("interrupted.txt");
+  ASSERT_GT(pid, 0);
   const fs::path second_frame = Out() / "cache/sim/particles.0001.h5part";
   for (int k = 0; k < 200 && !fs::exists(second_frame); ++k) std::this_thread::sleep_for(std::chrono::milliseconds(50));
   kill(pid, SIGINT);  // like Ctrl-C, but only to rime-bake: it must stop the running tool itself
@@ -456,9 +448,7 @@ pid_t DeadPid() {
 
 TEST_F(Bake, SecondBakeIntoTheSameFolderIsRefusedNamingTheHolder) {
   setenv("FAKE_SIM_SLEEP", "0.5", 1);
-  const pid_t first = rime::test::Spawn(
-      {RIME_BINARY_DIR "/bin/rime-bake", scene_.string(), "--tools", (root_ / "tools").string(), "-o", Out().string(), "-q"},
-      root_ / "first.txt");
+  const pid_t first = StartBake("first.txt");
   ASSERT_GT(first, 0);
   for (int k = 0; k < 200 && !fs::exists(Out() / "cache/sim/particles.0000.h5part"); ++k)
     std::this_thread::sleep_for(std::chrono::milliseconds(25));
@@ -514,9 +504,7 @@ TEST_F(Bake, LockNamingAnotherHostIsRefusedNotTakenOver) {
 // last of its tools has exited, so a rerun cannot race a tool that is still writing.
 TEST_F(Bake, ToolsOfAKilledBakeHoldTheLockUntilTheyExit) {
   setenv("FAKE_SIM_SLEEP", "3", 1);  // the fake simulation's `sleep 3` outlives the killed bake
-  const pid_t bake = rime::test::Spawn(
-      {RIME_BINARY_DIR "/bin/rime-bake", scene_.string(), "--tools", (root_ / "tools").string(), "-o", Out().string(), "-q"},
-      root_ / "killed.txt");
+  const pid_t bake = StartBake("killed.txt");
   ASSERT_GT(bake, 0);
   for (int k = 0; k < 200 && ReadFile(root_ / "invocations.log").find("rime-sim") == std::string::npos; ++k)
     std::this_thread::sleep_for(std::chrono::milliseconds(25));

@@ -4,7 +4,6 @@
 // the same frames as an uninterrupted one.
 #include <gtest/gtest.h>
 #include <signal.h>
-#include <spawn.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -19,12 +18,12 @@
 #include "rime/core/error.h"
 #include "rime/io/particles.h"
 #include "rime/io/scene.h"
+#include "rime/test/bake_outputs.h"
 #include "rime/test/files.h"
 #include "rime/test/small_bake_scene.h"
 #include "rime/test/temp_folder.h"
 
 namespace fs = std::filesystem;
-extern char** environ;
 
 namespace rime {
 namespace {
@@ -116,17 +115,12 @@ TEST_F(BakeEndToEnd, RerunsOnlyWhatChanged) {
 TEST_F(BakeEndToEnd, KilledDuringSimulationResumesToTheSameFrames) {
   ASSERT_EQ(RunBake(Baked(), "clean"), 0) << output_;  // the uninterrupted reference
   const fs::path out = root_ / "out_killed";
-  auto args = Args(out, "clean -q");
-  std::vector<char*> argv;
-  for (auto& a : args) argv.push_back(a.data());
-  argv.push_back(nullptr);
-  pid_t pid = 0;
-  ASSERT_EQ(posix_spawn(&pid, argv[0], nullptr, nullptr, argv.data(), environ), 0);
+  const pid_t pid = test::Spawn(Args(out, "clean -q"), root_ / "killed.txt");
+  ASSERT_GT(pid, 0);
   const fs::path first_frames = io::FramePath(out / "cache/sim", "particles", 1, "h5part");
   for (int k = 0; k < 60000 && !fs::exists(first_frames); ++k) std::this_thread::sleep_for(std::chrono::milliseconds(5));
   kill(pid, SIGKILL);  // the running rime-sim gets SIGTERM from the kernel (PR_SET_PDEATHSIG)
-  int status = 0;
-  waitpid(pid, &status, 0);
+  test::WaitExit(pid);
   std::this_thread::sleep_for(std::chrono::seconds(1));
   ASSERT_TRUE(fs::exists(first_frames)) << "the simulation never wrote frame 1";
   if (fs::exists(io::FramePath(out / "cache/sim", "particles", kLastFrame, "h5part")))

@@ -9,36 +9,18 @@
 
 #include "rime/exec/device.h"
 #include "rime/sph/simulation.h"
-#include "rime/test/sph_scenes.h"
+#include "rime/test/dam_break.h"
 
 namespace rime::gpu_check {
 
-/// Dam break with `n` particles per block edge (PERFORMANCE.md scene, spacing 0.0264 m).
+/// Dam break with `n` particles per block edge (the benchmark's scene).
 inline io::Scene DamBreak(int n, bool freezing) {
-  const double dp = 0.0264;
-  io::Scene scene;
-  scene.fluid.spacing = dp;
-  scene.modules =
-      freezing ? std::set<std::string>{"gravity", "viscosity", "surface_tension", "freezing"} : std::set<std::string>{"gravity"};
-  scene.solver.time_step = rime::io::TimeStep::kFixed;
-  scene.solver.dt = 0.001;
-  scene.freezing.glaze_threshold = 0.05;
-  scene.freezing.icicle_threshold = 0.01;
-  io::FluidBlock b;
-  b.min = {1.1 * dp, 1.1 * dp, 1.1 * dp};
-  b.max = b.min + Vec3d(n - 1, n - 1, n - 1) * dp;
-  scene.fluid_blocks.push_back(b);
-  io::SolidObject box;
-  box.name = "box";
-  scene.solids.push_back(box);
-  return scene;
+  return test::DamBreakScene(
+      n, freezing ? std::set<std::string>{"gravity", "viscosity", "surface_tension", "freezing"} : std::set<std::string>{"gravity"});
 }
 
 inline std::unique_ptr<sph::Simulation<float>> Make(const io::Scene& scene, const exec::Device& device, double box_scale) {
-  auto sim = std::make_unique<sph::Simulation<float>>(scene, device);
-  sim->AddBoundaryObject(sph::test::BoxBoundary(scene.fluid.spacing, 4.0 * box_scale, 3.0 * box_scale, 1.5 * box_scale), "box");
-  sim->Initialize();
-  return sim;
+  return test::MakeDamBreak(scene, device, box_scale);
 }
 
 struct Difference {

@@ -33,6 +33,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <numbers>
 #include <tuple>
 
 #include "rime/core/error.h"
@@ -52,8 +53,6 @@ using HalfedgeIndex = Mesh::Halfedge_index;
 namespace PMP = CGAL::Polygon_mesh_processing;
 namespace SMS = CGAL::Surface_mesh_simplification;
 namespace params = CGAL::parameters;
-
-constexpr double kPi = 3.14159265358979323846;
 
 double ProcessCpuSeconds() {
   timespec t{};
@@ -228,7 +227,7 @@ class Chain {
       if (settings_.remove_degenerate) PMP::remove_degenerate_faces(mesh_);
       bool almost_ok = true;
       if (settings_.remove_almost_degenerate) {
-        const double cap_cosine = std::cos(settings_.cap_angle_deg * kPi / 180);
+        const double cap_cosine = std::cos(settings_.cap_angle_deg * std::numbers::pi / 180);
         // Only collapse edges no longer than the mean edge: keeps the collapses local.
         almost_ok = PMP::experimental::remove_almost_degenerate_faces(mesh_, cap_cosine, settings_.needle_ratio, MeanEdge());
       }

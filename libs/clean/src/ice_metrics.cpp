@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <numbers>
 #include <queue>
 
 #include "rime/core/union_find.h"
@@ -12,8 +13,6 @@
 
 namespace rime::clean {
 namespace {
-
-constexpr double kPi = 3.14159265358979323846;
 
 /// CSR lists of `points` within `radius` of each query (host vectors).
 struct Lists {
@@ -43,7 +42,7 @@ Lists Within(const std::vector<Vec3f>& points, const std::vector<Vec3f>& queries
 double AngleDeg(const Vec3d& a, const Vec3d& b) {
   const double na = Norm(a), nb = Norm(b);
   if (!(na > 0 && nb > 0)) return -1;
-  return std::acos(std::clamp(Dot(a, b) / (na * nb), -1.0, 1.0)) * 180 / kPi;
+  return std::acos(std::clamp(Dot(a, b) / (na * nb), -1.0, 1.0)) * 180 / std::numbers::pi;
 }
 
 /// Taubin λ|μ smoothing with uniform weights: removes the short wavelengths without shrinking.

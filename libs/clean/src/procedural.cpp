@@ -2,14 +2,11 @@
 #include "rime/clean/procedural.h"
 
 #include <cmath>
+#include <numbers>
 #include <random>
 #include <unordered_map>
 
 namespace rime::clean::procedural {
-namespace {
-constexpr double kPi = 3.14159265358979323846;
-}
-
 io::TriMesh Icosphere(double radius, int subdivisions, Vec3d center) {
   const double t = (1 + std::sqrt(5.0)) / 2;
   std::vector<Vec3d> unit = {{-1, t, 0},  {1, t, 0},  {-1, -t, 0}, {1, -t, 0}, {0, -1, t},  {0, 1, t},
@@ -139,7 +136,7 @@ double IceNoise(const Vec3d& p, std::uint64_t seed) {
 io::TriMesh NoisyBall(std::size_t target_triangles, std::uint64_t seed) {
   const double radius = 0.5;
   // Surface nets give about 3 triangles per cell face of surface (1.5 crossed edges per h^2, 2 each).
-  const double cell = std::sqrt(3 * 4 * kPi * radius * radius / double(target_triangles));
+  const double cell = std::sqrt(3 * 4 * std::numbers::pi * radius * radius / double(target_triangles));
   const double reach = radius * 1.1 + 2 * cell;
   return SurfaceNets([&](const Vec3d& p) { return Norm(p) - radius * (1 + IceNoise(p, seed)); }, Vec3d::Splat(-reach), Vec3d::Splat(reach),
                      cell);
@@ -147,7 +144,7 @@ io::TriMesh NoisyBall(std::size_t target_triangles, std::uint64_t seed) {
 
 io::TriMesh NoisyTorus(std::size_t target_triangles, std::uint64_t seed) {
   const double major = 0.35, minor = 0.12;
-  const double cell = std::sqrt(3 * 4 * kPi * kPi * major * minor / double(target_triangles));
+  const double cell = std::sqrt(3 * 4 * std::numbers::pi * std::numbers::pi * major * minor / double(target_triangles));
   const double reach_xy = major + minor * 1.2 + 2 * cell, reach_z = minor * 1.2 + 2 * cell;
   return SurfaceNets(
       [&](const Vec3d& p) {

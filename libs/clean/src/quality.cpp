@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <numbers>
 #include <numeric>
 
 #include "rime/core/union_find.h"
@@ -12,8 +13,6 @@
 
 namespace rime::clean {
 namespace {
-
-constexpr double kPi = 3.14159265358979323846;
 
 /// Vertex -> incident triangles, compressed rows.
 struct VertexFaces {
@@ -119,7 +118,7 @@ MeshStats ComputeStats(const io::TriMesh& mesh) {
   for (const Vec3f& p : mesh.positions) center += Vec3d(p);
   center /= double(std::max<std::size_t>(nv, 1));
   double area = 0, volume = 0, edge_sum = 0;
-  double min_angle = kPi;
+  double min_angle = std::numbers::pi;
   for (const auto& t : mesh.triangles) {
     const Vec3d a = Vec3d(mesh.positions[t[0]]) - center, b = Vec3d(mesh.positions[t[1]]) - center,
                 c = Vec3d(mesh.positions[t[2]]) - center;
@@ -140,7 +139,7 @@ MeshStats ComputeStats(const io::TriMesh& mesh) {
     min_angle = std::min({min_angle, angles[0], angles[1], angles[2]});
   }
   s.area = area, s.volume = volume;
-  s.min_angle_deg = min_angle * 180.0 / kPi;
+  s.min_angle_deg = min_angle * 180.0 / std::numbers::pi;
   s.mean_edge_length = edge_sum / (3.0 * double(mesh.triangles.size()));
   return s;
 }

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <numbers>
 #include <random>
 
 #include "rime/core/error.h"
@@ -13,8 +14,6 @@
 
 namespace rime::clean {
 namespace {
-
-constexpr double kPi = 3.14159265358979323846;
 
 /// Distance from each point to `surface`: TransferVelocities with velocity = position returns
 /// the nearest surface point itself (barycentric interpolation of a linear field is exact).
@@ -110,7 +109,7 @@ TEST(Clean, NoisySphereWithSpecksAndHoleBecomesOneClosedComponent) {
   io::TriMesh sphere = procedural::Icosphere(1.0, 5);  // 20480 faces, edge ~0.035 m
   procedural::AddRadialNoise(sphere, 0.004, 42);
   const double sphere_volume = ComputeStats(sphere).volume;
-  ASSERT_NEAR(sphere_volume, 4.0 / 3.0 * kPi, 0.02 * 4.0 / 3.0 * kPi);
+  ASSERT_NEAR(sphere_volume, 4.0 / 3.0 * std::numbers::pi, 0.02 * 4.0 / 3.0 * std::numbers::pi);
 
   io::TriMesh input = sphere;
   procedural::PunchHole(input, {0, 0, 1}, 0.12);                                         // a hole of about 40 border edges

@@ -1,14 +1,13 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <numbers>
 
 #include "rime/clean/procedural.h"
 #include "rime/clean/quality.h"
 
 namespace rime::clean {
 namespace {
-
-constexpr double kPi = 3.14159265358979323846;
 
 io::TriMesh UnitCube() {
   io::TriMesh m;
@@ -76,8 +75,8 @@ TEST(Quality, IcosphereConvergesToSphere) {
   EXPECT_EQ(s.faces, 20u * 1024u);
   EXPECT_TRUE(s.closed());
   EXPECT_TRUE(s.manifold());
-  EXPECT_NEAR(s.volume, 4.0 / 3.0 * kPi * 8, 4.0 / 3.0 * kPi * 8 * 0.005);
-  EXPECT_NEAR(s.area, 4 * kPi * 4, 4 * kPi * 4 * 0.005);
+  EXPECT_NEAR(s.volume, 4.0 / 3.0 * std::numbers::pi * 8, 4.0 / 3.0 * std::numbers::pi * 8 * 0.005);
+  EXPECT_NEAR(s.area, 4 * std::numbers::pi * 4, 4 * std::numbers::pi * 4 * 0.005);
 }
 
 TEST(Quality, SurfaceNetsBallIsClosedOutward) {
@@ -91,7 +90,7 @@ TEST(Quality, SurfaceNetsBallIsClosedOutward) {
   EXPECT_LE(s.boundary_edges, 4 * s.non_manifold_edges);
   EXPECT_EQ(s.components, 1u);
   // Outward: positive volume near the (noisy) sphere of radius 0.5.
-  EXPECT_NEAR(s.volume, 4.0 / 3.0 * kPi * 0.125, 4.0 / 3.0 * kPi * 0.125 * 0.1);
+  EXPECT_NEAR(s.volume, 4.0 / 3.0 * std::numbers::pi * 0.125, 4.0 / 3.0 * std::numbers::pi * 0.125 * 0.1);
 }
 
 }  // namespace

@@ -36,6 +36,7 @@
 #include "rime/sph/simulation.h"
 #include "rime/test/sph_scenes.h"
 #include "rime/test/measure.h"
+#include "rime/test/run_in_child.h"
 #include "rime/test/validation.h"
 #if RIME_ACCURACY_SURFACE
 #include "rime/surface/frame_input.h"
@@ -245,8 +246,6 @@ json RunHydrostatic(const Setting& s) {
   return {{"hydro_slope_error", error}, {"hydro_noise", noise}, {"hydro_max_speed", max_speed}, {"hydro_particles", particles}};
 }
 
-// One run in a child process; the parent gets the child's JSON through a pipe and its own
-// rusage (CPU time, peak RSS) from wait4.
 // Symmetric mean nearest-neighbour distance between two point sets (brute force: a few thousand
 // ice particles each), m; NaN when either is empty.
 double ChamferDistance(const json& a, const json& b) {
@@ -270,10 +269,6 @@ double ChamferDistance(const json& a, const json& b) {
 }
 
 // User + system CPU time of a rusage record, s.
-double CpuSeconds(const rusage& u) {
-  return double(u.ru_utime.tv_sec + u.ru_stime.tv_sec) + 1e-6 * double(u.ru_utime.tv_usec + u.ru_stime.tv_usec);
-}
-
 enum class Job { kDamBreak, kHydrostatic, kVoxelSweep };
 
 // Surface reconstruction of the freezing reference's ice (its last frame, default ellipsoid field)
@@ -292,8 +287,8 @@ json RunVoxelSweep(const Setting& s) {
   const double wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   rusage usage{};
   getrusage(RUSAGE_SELF, &usage);
-  json r = {{"wall_s", wall_s},  {"surface_cpu_s", CpuSeconds(usage)},  {"surface_peak_rss_mib", usage.ru_maxrss / 1024.0},
-            {"ice", ice.size()}, {"triangles", coarse.stats.triangles}, {"voxel_size", coarse.stats.voxel_size}};
+  json r = {{"wall_s", wall_s},  {"surface_cpu_s", test::CpuSeconds(usage)}, {"surface_peak_rss_mib", usage.ru_maxrss / 1024.0},
+            {"ice", ice.size()}, {"triangles", coarse.stats.triangles},      {"voxel_size", coarse.stats.voxel_size}};
   settings.voxel_ratio = kFinestVoxel;
   const surface::Result fine = surface::Reconstruct(ice, settings);
   std::vector<Vec3d> vertices(coarse.mesh.positions.begin(), coarse.mesh.positions.end());
@@ -324,12 +319,9 @@ json RunJob(Job job, const Setting& s, double end_time) {
   return {};
 }
 
+// One run in a child process: its JSON, with the child's own CPU time and peak RSS added.
 json RunChild(const Setting& s, double end_time, int threads, Job job = Job::kDamBreak) {
-  int fd[2];
-  if (pipe(fd) != 0) throw std::runtime_error("pipe failed");
-  const pid_t pid = fork();
-  if (pid == 0) {
-    close(fd[0]);
+  const test::ChildResult child = test::RunInChild([&] {
     json r;
     try {
       exec::SetCpuThreads(threads);
@@ -337,28 +329,11 @@ json RunChild(const Setting& s, double end_time, int threads, Job job = Job::kDa
     } catch (const std::exception& e) {
       r = {{"diverged", true}, {"failure", e.what()}};
     }
-    const std::string text = r.dump();
-    std::size_t off = 0;
-    while (off < text.size()) {
-      const ssize_t n = write(fd[1], text.data() + off, text.size() - off);
-      if (n <= 0) break;
-      off += std::size_t(n);
-    }
-    close(fd[1]);
-    _exit(0);
-  }
-  close(fd[1]);
-  std::string text;
-  char buf[1 << 16];
-  ssize_t n;
-  while ((n = read(fd[0], buf, sizeof buf)) > 0) text.append(buf, std::size_t(n));
-  close(fd[0]);
-  int status = 0;
-  rusage usage{};
-  wait4(pid, &status, 0, &usage);
-  json r = text.empty() ? json{{"diverged", true}, {"failure", "child crashed"}} : json::parse(text);
-  r["cpu_s"] = CpuSeconds(usage);
-  r["peak_rss_mib"] = usage.ru_maxrss / 1024.0;
+    return r.dump();
+  });
+  json r = child.output.empty() ? json{{"diverged", true}, {"failure", "child crashed"}} : json::parse(child.output);
+  r["cpu_s"] = test::CpuSeconds(child.usage);
+  r["peak_rss_mib"] = child.usage.ru_maxrss / 1024.0;
   return r;
 }
 
@@ -488,8 +463,8 @@ int main(int argc, char** argv) {
   const int used_threads = threads > 0 ? threads : int(hw);
 
   std::vector<Setting> settings = Settings(!no_freezing);
-  const std::string snapshot =
-      (std::filesystem::temp_directory_path() / fmt::format("rime-accuracy-{}-freezing-reference.h5part", getpid())).string();
+  // The freezing reference's last frame, input of the voxel-size sweep; removed at the end.
+  const std::string snapshot = (std::filesystem::path(out_dir) / fmt::format("freezing-reference.{}.h5part", getpid())).string();
   for (Setting& s : settings)
     if (s.label == "freezing: reference") s.snapshot = snapshot;
   std::vector<json> rows;
@@ -566,7 +541,10 @@ int main(int argc, char** argv) {
 
   // Reconstruction voxel size, on the freezing reference's ice (the surface stage's own knob).
   std::vector<json> surface_rows;
-  if (!no_surface && std::filesystem::exists(snapshot)) {
+  const bool reference_has_ice = fref.value("ice", 0LL) > 0;
+  if (!no_surface && std::filesystem::exists(snapshot) && !reference_has_ice)
+    std::fprintf(stderr, "  voxel sweep skipped: the freezing reference made no ice by %.2f s\n", end_time);
+  if (!no_surface && std::filesystem::exists(snapshot) && reference_has_ice) {
     for (const double ratio : {1.0, 0.75, 0.5, 0.35, kFinestVoxel}) {
       Setting s;
       s.snapshot = snapshot, s.voxel_ratio = ratio;

@@ -24,13 +24,6 @@ using namespace rime;
 namespace fs = std::filesystem;
 
 namespace {
-/// CPU time of the whole process: on a machine shared with other work, wall time overstates the
-/// cost; CPU time divided by threads is the per-core figure.
-double ProcessCpuSeconds() {
-  timespec t{};
-  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t);
-  return double(t.tv_sec) + 1e-9 * double(t.tv_nsec);
-}
 /// Largest and mean distance from the vertices and face centroids of `from` to the surface of
 /// `to` (TransferVelocities with velocity = position returns the nearest surface point).
 std::pair<double, double> DistanceTo(const io::TriMesh& from, const io::TriMesh& to) {
@@ -53,7 +46,7 @@ int main(int argc, char** argv) {
   std::vector<std::size_t> sizes = {100000, 500000, 2000000};
   std::vector<std::string> shapes = {"ball", "torus"};
   int runs = 3, threads = 1;
-  std::string json_path = RIME_BENCH_OUTPUT_DIR "/results.json", scratch = (fs::temp_directory_path() / "rime_bench_clean").string();
+  std::string json_path = RIME_BENCH_OUTPUT_DIR "/results.json", scratch = RIME_BENCH_OUTPUT_DIR "/scratch";
   bool remesh = false, keep = false, hausdorff = false;
   std::string decimate_method(io::EnumName(io::CleanupSettings{}.decimate_method));
   app.add_option("--sizes", sizes, "Input triangle counts (approximate)");
@@ -61,14 +54,14 @@ int main(int argc, char** argv) {
   app.add_option("--runs", runs, "Runs per case (median reported)")->check(CLI::PositiveNumber);
   app.add_option("--threads", threads, "CPU threads (1 = per-core figure)")->check(CLI::PositiveNumber);
   app.add_option("--json", json_path, "JSON output");
-  app.add_option("--scratch", scratch, "Folder for the read/write timing files");
+  app.add_option("--scratch", scratch, "Folder for the read/write timing files")->capture_default_str();
   app.add_flag("--keep", keep, "Keep the generated input meshes in --scratch");
   app.add_flag("--remesh", remesh, "Also run one isotropic remeshing pass (not in the default chain)");
   app.add_option("--decimate-method", decimate_method, "batch (default) or cgal")->check(CLI::IsMember({"batch", "cgal"}));
   app.add_flag("--hausdorff", hausdorff, "Also measure the distance between input and output (untimed; slow)");
   CLI11_PARSE(app, argc, argv);
   exec::SetCpuThreads(threads);
-  fs::create_directories(scratch);
+  const bool created_scratch = fs::create_directories(scratch);
 
   io::CleanupSettings settings;
   settings.remesh = remesh;
@@ -105,10 +98,10 @@ int main(int argc, char** argv) {
         read_obj_s.push_back(watch.seconds());
         fs::remove(obj_file);
         watch.Restart();
-        const double cpu0 = ProcessCpuSeconds();
+        const double cpu0 = test::ProcessCpuSeconds();
         clean::CleanResult result = clean::Clean(read, settings);
         clean_s.push_back(watch.seconds());
-        cpu_s.push_back(ProcessCpuSeconds() - cpu0);
+        cpu_s.push_back(test::ProcessCpuSeconds() - cpu0);
         for (const auto& op : result.report.operations) {
           per_op[op.name].push_back(op.seconds);
           per_op_cpu[op.name].push_back(op.cpu_seconds);
@@ -178,5 +171,7 @@ int main(int argc, char** argv) {
                                          .dump(2) +
                                      "\n");
   fmt::print("wrote {}\n", json_path);
+  std::error_code not_empty;
+  if (created_scratch) fs::remove(scratch, not_empty);  // only when empty: --keep's meshes stay
   return 0;
 }

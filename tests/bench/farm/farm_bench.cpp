@@ -66,14 +66,14 @@ int main(int argc, char** argv) {
   app.add_option("--frames", frames, "Frames of the scene")->check(CLI::Range(2, 1000))->capture_default_str();
   app.add_option("--chunk", chunk, "Frames per array task")->check(CLI::PositiveNumber)->capture_default_str();
   app.add_option("--json", json_path, "JSON output file")->capture_default_str();
-  app.add_flag("--keep", keep, "Keep the temporary folder (outputs, logs, the cluster's logs)");
+  app.add_flag("--keep", keep, "Keep the run's folder in the build folder (outputs, logs, the cluster's logs)");
   CLI11_PARSE(app, argc, argv);
 
   if (const auto missing = rime::test::LocalSlurm::MissingBinary()) {
     std::fprintf(stderr, "rime-bench-farm: Slurm is not installed (%s not found; Debian: apt install slurm-wlm)\n", missing->c_str());
     return 2;
   }
-  const fs::path root = fs::temp_directory_path() / fmt::format("rime_bench_farm_{}", getpid());
+  const fs::path root = fs::path(RIME_BENCH_OUTPUT_DIR) / fmt::format("run.{}", getpid());
   fs::create_directories(root);
   std::ofstream(root / "scene.toml") << Scene(frames);
   std::ofstream(root / "site.toml") << fmt::format("[farm]\nchunk = {}\ncpus_per_task = 1\n", chunk);

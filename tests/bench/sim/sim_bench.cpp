@@ -20,7 +20,7 @@
 #include "rime/exec/device.h"
 #include "rime/sph/simulation.h"
 #include "rime/test/measure.h"
-#include "rime/test/sph_scenes.h"
+#include "rime/test/dam_break.h"
 
 using namespace rime;
 
@@ -38,24 +38,9 @@ struct Result {
   double memory_mib = 0;
 };
 
-io::Scene DamBreak(double dp, double block, std::vector<std::string> modules) {
-  io::Scene scene;
-  scene.fluid.spacing = dp;
-  scene.modules = {modules.begin(), modules.end()};
-  scene.solver.time_step = rime::io::TimeStep::kFixed;
-  scene.solver.dt = 0.001;
-  scene.solver.eta = 0.001;
-  scene.freezing.glaze_threshold = 0.05;  // the examples' calibrated thresholds
-  scene.freezing.icicle_threshold = 0.01;
-  io::FluidBlock b;
-  b.min = {1.1 * dp, 1.1 * dp, 1.1 * dp};
-  const double n = std::floor(block / dp);
-  b.max = b.min + Vec3d(n - 1, n - 1, n - 1) * dp;
-  scene.fluid_blocks.push_back(b);
-  io::SolidObject box;
-  box.name = "box";
-  scene.solids.push_back(box);
-  return scene;
+// The shared dam break with a water cube of `block` metres a side.
+io::Scene DamBreak(double block, std::set<std::string> modules) {
+  return test::DamBreakScene(int(std::floor(block / test::kDamBreakSpacing)), std::move(modules));
 }
 
 // The default minimum of 3 pressure iterations keeps settled water from breathing (README); this
@@ -71,7 +56,7 @@ io::Scene MinIterations(io::Scene scene, int min_iterations) {
 constexpr int kStillWaterSide = 8;
 
 io::Scene MostlyFrozen(double dp) {
-  io::Scene scene = DamBreak(dp, 1.0, {"gravity", "viscosity", "freezing"});
+  io::Scene scene = DamBreak(1.0, {"gravity", "viscosity", "freezing"});
   io::FluidBlock water;
   water.min = scene.fluid_blocks[0].min + Vec3d(14.5 * dp, 14.5 * dp, 36 * dp);  // centred on the ice, in its hollows
   water.max = water.min + Vec3d(kStillWaterSide - 1, kStillWaterSide - 1, kStillWaterSide - 1) * dp;
@@ -122,9 +107,8 @@ Result Run(const std::string& name, const io::Scene& scene, int warmup, int step
   r.name = name;
   std::vector<double> ms, cpu, nb, fo, pr, in, fz, it, gr, fl, bl, re;
   for (int rep = 0; rep < repeats; ++rep) {
-    sph::Simulation<float> sim(scene, exec::Device::Cpu());
-    sim.AddBoundaryObject(sph::test::BoxBoundary(scene.fluid.spacing, 4.0, 3.0, 1.5), "box");
-    sim.Initialize();
+    const std::unique_ptr<sph::Simulation<float>> made = test::MakeDamBreak(scene, exec::Device::Cpu());
+    sph::Simulation<float>& sim = *made;
     if (frozen) FreezeBlock(sim, scene.fluid.spacing, scene.fluid_blocks[0].max.z + 0.5 * scene.fluid.spacing);
     for (int s = 0; s < warmup; ++s) sim.Step(0.001);  // let the block start falling
     sim.EnableTimings(true);
@@ -185,7 +169,7 @@ int main(int argc, char** argv) {
   app.add_flag("--quick", quick, "Only the 50k cases");
   CLI11_PARSE(app, argc, argv);
   exec::SetCpuThreads(threads);
-  const double dp = 0.0264;
+  const double dp = test::kDamBreakSpacing;
   const double load_before = test::LoadAverage();
   std::vector<Result> results;
   struct Case {
@@ -193,13 +177,13 @@ int main(int argc, char** argv) {
     io::Scene scene;
     bool frozen = false;
   };
-  const std::vector<Case> cases = {{"dam break 50k", DamBreak(dp, 1.0, {"gravity"})},
-                                   {"dam break 50k, min 2 iterations", MinIterations(DamBreak(dp, 1.0, {"gravity"}), 2)},
-                                   {"dam break 50k + viscosity", DamBreak(dp, 1.0, {"gravity", "viscosity"})},
-                                   {"dam break 50k + surface tension", DamBreak(dp, 1.0, {"gravity", "surface_tension"})},
-                                   {"dam break 50k + viscosity + freezing", DamBreak(dp, 1.0, {"gravity", "viscosity", "freezing"})},
+  const std::vector<Case> cases = {{"dam break 50k", DamBreak(1.0, {"gravity"})},
+                                   {"dam break 50k, min 2 iterations", MinIterations(DamBreak(1.0, {"gravity"}), 2)},
+                                   {"dam break 50k + viscosity", DamBreak(1.0, {"gravity", "viscosity"})},
+                                   {"dam break 50k + surface tension", DamBreak(1.0, {"gravity", "surface_tension"})},
+                                   {"dam break 50k + viscosity + freezing", DamBreak(1.0, {"gravity", "viscosity", "freezing"})},
                                    {"50k, 99 % frozen + viscosity + freezing", MostlyFrozen(dp), true},
-                                   {"dam break 200k", DamBreak(dp, 1.6, {"gravity"})}};
+                                   {"dam break 200k", DamBreak(1.6, {"gravity"})}};
   for (const Case& c : cases) {
     if (!only.empty() && std::find(only.begin(), only.end(), c.name) == only.end()) continue;
     if (only.empty() && quick && c.name == "dam break 200k") continue;

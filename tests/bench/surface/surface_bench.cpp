@@ -34,6 +34,7 @@
 
 #include "rime/surface/reconstruct.h"
 #include "rime/test/measure.h"
+#include "rime/test/run_in_child.h"
 
 using namespace rime;
 using Clock = std::chrono::steady_clock;
@@ -91,51 +92,23 @@ struct OpenVdbParticles {
 // IceShape in a child process, the set sent back through a pipe, so that the parent stays free of
 // TBB (see the header).
 surface::ParticleSet GenerateIsolated(std::size_t n, bool sheet) {
-  int fd[2];
-  if (pipe(fd) != 0) throw std::runtime_error("pipe failed");
-  const pid_t pid = fork();
-  if (pid == 0) {
-    close(fd[0]);
+  const test::ChildResult child = test::RunInChild([&] {
     const surface::ParticleSet set = IceShape(n, sheet);
-    auto send = [&](const void* data, std::size_t bytes) {
-      for (const char* c = static_cast<const char*>(data); bytes > 0;) {
-        const ssize_t w = write(fd[1], c, bytes);
-        if (w <= 0) _exit(1);
-        c += w, bytes -= std::size_t(w);
-      }
-    };
-    const std::uint64_t count = set.size();
-    send(&count, sizeof count);
-    send(set.positions.data(), count * sizeof(Vec3d));
-    send(set.stored_anisotropy.data(), count * sizeof(std::array<float, 6>));
-    _exit(0);
-  }
-  close(fd[1]);
-  auto receive = [&](void* data, std::size_t bytes) {
-    for (char* c = static_cast<char*>(data); bytes > 0;) {
-      const ssize_t r = read(fd[0], c, bytes);
-      if (r <= 0) throw std::runtime_error("particle generator failed");
-      c += r, bytes -= std::size_t(r);
-    }
-  };
+    std::string bytes;
+    bytes.append(reinterpret_cast<const char*>(set.positions.data()), set.size() * sizeof(Vec3d));
+    bytes.append(reinterpret_cast<const char*>(set.stored_anisotropy.data()), set.size() * sizeof(std::array<float, 6>));
+    return bytes;
+  });
+  const std::size_t per_particle = sizeof(Vec3d) + sizeof(std::array<float, 6>);
+  if (!child.exited_cleanly || child.output.size() % per_particle != 0) throw std::runtime_error("particle generator failed");
+  const std::size_t count = child.output.size() / per_particle;
   surface::ParticleSet set;
   set.spacing = kSpacing;
-  std::uint64_t count = 0;
-  receive(&count, sizeof count);
   set.positions.resize(count);
   set.stored_anisotropy.resize(count);
-  receive(set.positions.data(), count * sizeof(Vec3d));
-  receive(set.stored_anisotropy.data(), count * sizeof(std::array<float, 6>));
-  close(fd[0]);
-  int status = 0;
-  waitpid(pid, &status, 0);
+  std::memcpy(set.positions.data(), child.output.data(), count * sizeof(Vec3d));
+  std::memcpy(set.stored_anisotropy.data(), child.output.data() + count * sizeof(Vec3d), count * sizeof(std::array<float, 6>));
   return set;
-}
-
-double CpuSeconds() {
-  rusage usage{};
-  getrusage(RUSAGE_SELF, &usage);
-  return usage.ru_utime.tv_sec + usage.ru_stime.tv_sec + 1e-6 * (usage.ru_utime.tv_usec + usage.ru_stime.tv_usec);
 }
 
 struct Measure {
@@ -186,28 +159,17 @@ Measure RunOpenVdb(const surface::ParticleSet& set) {
 // resident memory.
 template <class F>
 bool Isolated(F body, int threads, Measure& out, std::uint64_t& peak) {
-  int fd[2];
-  if (pipe(fd) != 0) return false;
-  const pid_t pid = fork();
-  if (pid == 0) {
-    close(fd[0]);
+  const test::ChildResult child = test::RunInChild([&] {
     tbb::global_control limit(tbb::global_control::max_allowed_parallelism, std::size_t(threads));
-    const double cpu0 = CpuSeconds();
+    const double cpu0 = test::ProcessCpuSeconds();
     Measure m = body();
-    m.cpu_seconds = CpuSeconds() - cpu0;
-    rusage usage{};
-    getrusage(RUSAGE_SELF, &usage);
-    const std::uint64_t bytes = std::uint64_t(usage.ru_maxrss) * 1024;
-    (void)!write(fd[1], &m, sizeof m);
-    (void)!write(fd[1], &bytes, sizeof bytes);
-    _exit(0);
-  }
-  close(fd[1]);
-  bool ok = read(fd[0], &out, sizeof out) == sizeof out && read(fd[0], &peak, sizeof peak) == sizeof peak;
-  close(fd[0]);
-  int status = 0;
-  waitpid(pid, &status, 0);
-  return ok && WIFEXITED(status) && WEXITSTATUS(status) == 0;
+    m.cpu_seconds = test::ProcessCpuSeconds() - cpu0;
+    return std::string(reinterpret_cast<const char*>(&m), sizeof m);
+  });
+  if (!child.exited_cleanly || child.output.size() != sizeof out) return false;
+  std::memcpy(&out, child.output.data(), sizeof out);
+  peak = std::uint64_t(child.usage.ru_maxrss) * 1024;
+  return true;
 }
 
 }  // namespace

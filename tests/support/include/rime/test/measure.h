@@ -1,10 +1,12 @@
 /// @file measure.h
 /// @brief What benchmarks and validation programs print beside a timing: the median of repeated
-/// runs, wall-clock seconds and the machine's load (on a shared machine, timings mean little
+/// runs, wall-clock and CPU seconds and the machine's load (on a shared machine, timings mean little
 /// without it).
 #pragma once
 
 #include <stdlib.h>
+#include <sys/resource.h>
+#include <time.h>
 
 #include <algorithm>
 #include <array>
@@ -34,6 +36,19 @@ class Stopwatch {
  private:
   std::chrono::steady_clock::time_point start_ = std::chrono::steady_clock::now();
 };
+
+/// CPU seconds (user and system, all threads) of this process so far: on a machine shared with
+/// other work wall time overstates the cost; CPU time divided by threads is the per-core figure.
+inline double ProcessCpuSeconds() {
+  timespec t{};
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t);
+  return double(t.tv_sec) + 1e-9 * double(t.tv_nsec);
+}
+
+/// CPU seconds (user and system) in a resource usage, e.g. a child's from wait4.
+inline double CpuSeconds(const rusage& usage) {
+  return double(usage.ru_utime.tv_sec + usage.ru_stime.tv_sec) + 1e-6 * double(usage.ru_utime.tv_usec + usage.ru_stime.tv_usec);
+}
 
 /// The 1-minute load average, or -1 where the system does not report it.
 inline double LoadAverage() {
