@@ -123,7 +123,7 @@ struct SolverSettings {
   double eta = 0.001;
   // At least 3, not Ihmsen's 2: after 2 the solve lets settled water breathe (the whole body in
   // phase at a few mm/s), since a body that sinks as a whole compresses only its bottom layer,
-  // which the average error hardly sees (Iisph.SettledBlockStaysAtRest).
+  // which the average error hardly sees (Iisph.SettledBlockBreathesWithTwoPressureIterations).
   int min_iterations = 3, max_iterations = 100;
   double warm_start = 0.5;
   AiiBoundary aii_boundary = AiiBoundary::kSplishSplash;
