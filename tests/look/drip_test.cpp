@@ -2,10 +2,13 @@
 // drips when air pressure holds it to the underside; without air pressure it falls off as a spray.
 // With tip_growth, water runs down the ice and freezes at its tip, so more ice hangs, and deeper.
 // Surfaced and cleaned as rime-bake does, the last frame is a smooth glaze with an icicle.
+// The eave example's drips freeze into slender icicles, which the surface keeps with smooth_limit.
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
+#include <set>
 
 #include "rime/clean/clean.h"
 #include "rime/clean/ice_metrics.h"
@@ -33,19 +36,27 @@ io::ParticleFrame Bake(const io::Scene& scene) {
   return sim.Snapshot(0);
 }
 
-Drips Measure(const io::Scene& scene, const io::ParticleFrame& frame, const char* variant) {
+/// Ice particles more than 2 d_p below the lowest solid particle above the ground (the ledge's or
+/// the eave's), clear of the ground; `bottom` receives that solid's lowest height.
+std::vector<Vec3d> HangingIce(const io::Scene& scene, const io::ParticleFrame& frame, double& bottom) {
   const auto x = frame.GetPositions<double>();
   const auto& phase = frame.Get<std::uint8_t>("phase");
   const double dp = scene.fluid.spacing, clear_of_ground = 5 * dp;
-  double ledge_bottom = 1e30;
+  bottom = 1e30;
   for (std::size_t i = 0; i < x.size(); ++i)
-    if (phase[i] == 1 && x[i].z > clear_of_ground) ledge_bottom = std::min(ledge_bottom, x[i].z);
+    if (phase[i] == 1 && x[i].z > clear_of_ground) bottom = std::min(bottom, x[i].z);
+  std::vector<Vec3d> hanging;
+  for (std::size_t i = 0; i < x.size(); ++i)
+    if (phase[i] == 2 && x[i].z > clear_of_ground && x[i].z < bottom - 2 * dp) hanging.push_back(x[i]);
+  return hanging;
+}
+
+Drips Measure(const io::Scene& scene, const io::ParticleFrame& frame, const char* variant) {
+  double bottom = 0;
+  const auto hanging = HangingIce(scene, frame, bottom);
   Drips d;
-  for (std::size_t i = 0; i < x.size(); ++i) {
-    if (phase[i] != 2 || x[i].z < clear_of_ground || x[i].z > ledge_bottom - 2 * dp) continue;
-    ++d.hanging;
-    d.deepest = std::max(d.deepest, (ledge_bottom - x[i].z) / dp);
-  }
+  d.hanging = int(hanging.size());
+  for (const Vec3d& p : hanging) d.deepest = std::max(d.deepest, (bottom - p.z) / scene.fluid.spacing);
   std::printf("%s: %d ice particles hang below the ledge, the deepest %.1f d_p\n", variant, d.hanging, d.deepest);
   return d;
 }
@@ -64,15 +75,43 @@ const Drips& DefaultDrips() {
   return drips;
 }
 
-/// rime-inspect's measures of the frame's ice, surfaced with `surfacing` and cleaned as the scene says.
-clean::IceMetrics InspectIce(const io::Scene& scene, const io::ParticleFrame& frame, const surface::Settings& surfacing) {
+/// The frame's ice surfaced with `surfacing` and cleaned as the scene says (what rime-bake writes).
+io::TriMesh CleanIce(const io::Scene& scene, const io::ParticleFrame& frame, const surface::Settings& surfacing) {
   std::vector<std::string> warnings;
   const surface::ParticleSet ice = surface::SelectPhase(frame, io::Phase::kIce, {}, warnings);
-  const clean::CleanResult cleaned = clean::Clean(surface::Reconstruct(ice, surfacing).mesh, scene.cleanup);
+  return clean::Clean(surface::Reconstruct(ice, surfacing).mesh, scene.cleanup).mesh;
+}
+
+/// rime-inspect's measures of a cleaned ice mesh of the frame.
+clean::IceMetrics InspectIce(const io::Scene& scene, const io::ParticleFrame& frame, const io::TriMesh& mesh) {
   std::set<std::uint32_t> objects;  // the ledge, not the ground
   for (std::uint32_t i = 0; i < scene.solids.size(); ++i)
     if (scene.solids[i].shape != io::SolidShape::kPlane) objects.insert(i);
-  return clean::MeasureIce(cleaned.mesh, frame, scene.solver.gravity, objects, {});
+  return clean::MeasureIce(mesh, frame, scene.solver.gravity, objects, {});
+}
+clean::IceMetrics InspectIce(const io::Scene& scene, const io::ParticleFrame& frame, const surface::Settings& surfacing) {
+  return InspectIce(scene, frame, CleanIce(scene, frame, surfacing));
+}
+
+/// Whether p lies inside the closed mesh: the parity of a ray's crossings (Möller–Trumbore), along
+/// a direction no lattice or axis-aligned edge lies on.
+bool InsideMesh(const io::TriMesh& mesh, const Vec3d& p) {
+  const Vec3d dir = Vec3d(0.1234, 0.2345, 1.0) / Norm(Vec3d(0.1234, 0.2345, 1.0));
+  int crossings = 0;
+  for (const auto& t : mesh.triangles) {
+    const Vec3d a(mesh.positions[t[0]]), e1 = Vec3d(mesh.positions[t[1]]) - a, e2 = Vec3d(mesh.positions[t[2]]) - a;
+    const Vec3d q = Cross(dir, e2);
+    const double det = Dot(e1, q);
+    if (std::abs(det) < 1e-18) continue;
+    const Vec3d s = p - a;
+    const double u = Dot(s, q) / det;
+    if (u < 0 || u > 1) continue;
+    const Vec3d r = Cross(s, e1);
+    const double v = Dot(dir, r) / det;
+    if (v < 0 || u + v > 1) continue;
+    if (Dot(e2, r) / det > 0) ++crossings;
+  }
+  return crossings % 2 == 1;
 }
 
 TEST(IceLook, DripsFreezeUnderTheDefaultLedgeOnlyWithAirPressure) {
@@ -120,6 +159,38 @@ TEST(IceLook, DefaultLedgeIsASmoothGlazeWithAHangingIcicle) {
   // Smooth at the particle scale: filtering halves the noise of the particle union, at least.
   EXPECT_LT(m.noise_rms, 0.5 * r.noise_rms);
   EXPECT_LT(m.sharp_area_fraction, 0.5 * r.sharp_area_fraction);
+}
+
+// The eave example's drips freeze into slender icicles one or two particles thick. Mean-curvature
+// flow would pinch them off the eave or dissolve them; with the scene's smooth_limit the cleaned
+// surface still holds the hanging ice.
+TEST(IceLook, EaveGrowsSlenderIciclesThatTheSurfaceKeeps) {
+  const io::Scene scene = io::LoadScene(RIME_SOURCE_DIR "/examples/eaves.toml");
+  ASSERT_GT(scene.surface.smooth_limit, 0.0);
+  const io::ParticleFrame frame = Bake(scene);
+  const surface::Settings limited = surface::FromScene(scene.surface, scene.surface.ice_field);
+  surface::Settings free = limited;
+  free.smooth_limit = 0;
+  const io::TriMesh kept = CleanIce(scene, frame, limited), loose = CleanIce(scene, frame, free);
+  const clean::IceMetrics m = InspectIce(scene, frame, kept), f = InspectIce(scene, frame, loose);
+  double bottom = 0;
+  const auto hanging = HangingIce(scene, frame, bottom);
+  const auto inside = [&](const io::TriMesh& mesh) {
+    const auto n = std::count_if(hanging.begin(), hanging.end(), [&](const Vec3d& p) { return InsideMesh(mesh, p); });
+    return double(n) / double(std::max<std::size_t>(hanging.size(), 1));
+  };
+  const double kept_share = inside(kept), loose_share = inside(loose);
+  std::printf(
+      "%zu icicles (%zu hanging, longest %.1f d_p), %zu pieces, %zu specks; hanging ice particles inside the surface: %.0f %% "
+      "of %zu with smooth_limit %.2f, %.0f %% without (%zu pieces, %zu specks)\n",
+      m.icicles.size(), m.hanging_icicles, m.icicle_length_max, m.components, m.specks, 100 * kept_share, hanging.size(),
+      scene.surface.smooth_limit, 100 * loose_share, f.components, f.specks);
+  // Slender ice (at least 1.5 times longer than wide) hanging 4 cm or more under the edge.
+  EXPECT_GE(m.hanging_icicles, 2u);
+  EXPECT_GE(m.icicle_length_max, 8.0);
+  // The surface shows most of the ice that hangs there; unlimited smoothing dissolves most of it.
+  EXPECT_GE(kept_share, 0.8);
+  EXPECT_LT(loose_share, 0.5 * kept_share);
 }
 
 }  // namespace

@@ -494,6 +494,21 @@ void InitializeOpenVdb() {
 
 namespace {
 
+// Keeps every value of `grid` within `limit` of `reference`'s, after each smoothing step: mean-curvature
+// flow pinches a neck thinner than its curvature radius away, so an icicle would come loose from
+// its eave; bounded, the neck keeps its thickness less the limit while particle bumps still smooth out.
+void ClampToBand(openvdb::FloatGrid& grid, const openvdb::FloatGrid& reference, float limit) {
+  const auto& ref = reference.tree();
+  openvdb::tree::LeafManager<openvdb::FloatTree> leaves(grid.tree());
+  leaves.foreach ([&](openvdb::FloatTree::LeafNodeType& leaf, std::size_t) {
+    const auto* ref_leaf = ref.probeConstLeaf(leaf.origin());
+    for (auto v = leaf.beginValueOn(); v; ++v) {
+      const float r = ref_leaf ? ref_leaf->getValue(v.pos()) : ref.getValue(v.getCoord());
+      v.setValue(std::clamp(*v, r - limit, r + limit));
+    }
+  });
+}
+
 void CheckSettings(const ParticleSet& particles, const Settings& s) {
   const auto fail = [](const std::string& what, const std::string& field) { throw InputError(what, field); };
   if (!(particles.spacing > 0)) fail("particle spacing must be positive", "spacing");
@@ -506,6 +521,7 @@ void CheckSettings(const ParticleSet& particles, const Settings& s) {
   if (!(s.half_band >= 3)) fail("narrow band half width must be at least 3 voxels", "half_band");
   if (s.smooth_iterations < 0) fail("smoothing iterations must be >= 0", "smooth");
   if (!(s.close_radius >= 0 && s.close_radius <= 4)) fail("closing radius must be in [0, 4] particle spacings", "close");
+  if (!(s.smooth_limit >= 0 && s.smooth_limit <= 4)) fail("smoothing limit must be in [0, 4] particle spacings", "smooth_limit");
   const auto& a = s.anisotropy;
   if (!(a.k_r >= 1)) fail("k_r must be >= 1", "k_r");
   if (!(a.k_s >= 0)) fail("k_s must be >= 0 (0 = automatic)", "k_s");
@@ -593,7 +609,8 @@ std::uint64_t EstimateMemoryBytes(const ParticleSet& particles, const Settings& 
   // The mesh and OpenVDB's meshing buffers: 26 (jittered ball) to 146 (two-layer sheet) triangles
   // per leaf; 6 kB per surface leaf keeps the estimate above the measured peak at 0.5–2M ice
   // particles and for water at fine voxels (docs/reliability.md, memory budgets). The process's
-  // fixed ~30 MB is not counted.
+  // fixed ~30 MB is not counted. `smooth_limit`'s copy of the level set (leaf_bytes per surface
+  // leaf) is freed before the mesh is built, and grid plus copy stay below the mesh phase.
   const double mesh_bytes_per_leaf = settings.mesh ? 6000.0 : 0.0;
   const double field_phase = all_leaves * leaf_bytes * 1.5;
   const double mesh_phase = surface_leaves * (leaf_bytes * 1.5 + mesh_bytes_per_leaf);
@@ -692,7 +709,11 @@ Result Reconstruct(const ParticleSet& particles, const Settings& settings) {
       filter.offset(-radius);
       filter.offset(radius);
     }
-    for (int k = 0; k < smooth_iterations; ++k) filter.meanCurvature();
+    const openvdb::FloatGrid::Ptr closed = settings.smooth_limit > 0 && smooth_iterations > 0 ? grid->deepCopy() : nullptr;
+    for (int k = 0; k < smooth_iterations; ++k) {
+      filter.meanCurvature();
+      if (closed) ClampToBand(*grid, *closed, float(settings.smooth_limit * particles.spacing));
+    }
   }
   if (settings.velocity_grid) {
     auto vel = openvdb::Vec3SGrid::create(openvdb::Vec3s(0, 0, 0));

@@ -26,6 +26,7 @@ Settings FromScene(const io::SurfaceSettings& scene, Field field) {
   s.half_band = scene.half_band;
   s.close_radius = scene.close;
   s.smooth_iterations = scene.smooth;
+  s.smooth_limit = scene.smooth_limit;
   s.velocity_grid = scene.velocity && has("vdb");
   s.density_grid = scene.density && has("vdb");
   s.mesh = has("obj") || has("ply");

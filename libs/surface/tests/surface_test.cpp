@@ -397,6 +397,46 @@ TEST(Reconstruct, SmoothingKeepsAClosedSurfaceOfTheSameSize) {
   EXPECT_LT(spread(b.mesh), spread(a.mesh));
 }
 
+// An icicle: a chain of single particles hanging from a ball. Mean-curvature flow pinches the thin
+// chain off the ball; with smooth_limit the neck stays and the icicle keeps its length.
+TEST(Reconstruct, SmoothingLimitKeepsAThinIcicleAttached) {
+  ParticleSet icicle = Ball(5 * kSpacing);
+  const int links = 10;
+  std::mt19937 rng(2);
+  std::uniform_real_distribution<double> u(-0.1, 0.1);
+  for (int k = 1; k <= links; ++k) icicle.positions.push_back(Vec3d(u(rng), u(rng), -5 - k) * kSpacing);
+  StoreAnisotropy(icicle);
+  Settings raw, free, limited;
+  raw.close_radius = free.close_radius = limited.close_radius = 0.5;
+  free.smooth_iterations = limited.smooth_iterations = 20;
+  limited.smooth_limit = 0.25;
+  const auto lowest = [](const io::TriMesh& m) {
+    float z = 0;
+    for (const Vec3f& p : m.positions) z = std::min(z, p.z);
+    return double(z) / kSpacing;
+  };
+  const Result a = Reconstruct(icicle, free), b = Reconstruct(icicle, limited);
+  const MeshReport ra = Analyze(a.mesh), rb = Analyze(b.mesh);
+  std::printf("free: %zu components, lowest %.2f d_p; limited: %zu components, lowest %.2f d_p\n", ra.components, lowest(a.mesh),
+              rb.components, lowest(b.mesh));
+  ExpectClosedOutward(b.mesh, "limited");
+  EXPECT_EQ(rb.components, 1u) << "the icicle came loose";
+  EXPECT_LT(lowest(b.mesh), -5 - links + 0.5) << "the icicle lost its tip";
+  EXPECT_TRUE(ra.components > 1 || lowest(a.mesh) > -5 - links + 1)
+      << "unlimited smoothing no longer pinches the chain: the test shows nothing";
+  // The ball's particle bumps are still smoothed: its vertices spread less about their mean radius.
+  const auto ball_spread = [](const io::TriMesh& m) {
+    std::vector<double> r;
+    for (const Vec3f& p : m.positions)
+      if (p.z > -3 * kSpacing) r.push_back(Norm(Vec3d(p)));
+    const double mean = std::accumulate(r.begin(), r.end(), 0.0) / double(r.size());
+    double var = 0;
+    for (double x : r) var += (x - mean) * (x - mean);
+    return std::sqrt(var / double(r.size()));
+  };
+  EXPECT_LT(ball_spread(b.mesh), 0.8 * ball_spread(Reconstruct(icicle, raw).mesh));
+}
+
 TEST(Reconstruct, EmptyInputGivesAValidEmptyLevelSet) {
   ParticleSet none;
   none.spacing = kSpacing;

@@ -45,6 +45,7 @@ struct SurfaceSettings {
   double half_band = 3;
   double close = 0.5;
   int smooth = 10;
+  double smooth_limit = 0;
   bool velocity = false;
   bool density = false;
   std::vector<std::string> formats{"obj", "vdb"};
@@ -110,6 +111,14 @@ struct SurfaceSettings {
                    "[ice-look.md](ice-look.md))",
             .flag = "--smooth"},
       s.smooth);
+    f(Param{.name = "smooth_limit",
+            .unit = "d_p",
+            .range = Range::Closed(0, 4),
+            .help = "the smoothing moves the surface at most this far from the closed particle surface (0 = no limit)",
+            .doc = "so thin icicles and sheets keep a neck instead of coming loose (mean-curvature flow pinches thin necks away; "
+                   "[ice-look.md](ice-look.md))",
+            .flag = "--smooth-limit"},
+      s.smooth_limit);
     f(Param{.name = "velocity", .help = "add a `vel` vec3 grid (particle velocities, for motion blur) to the VDB", .flag = "--vel"},
       s.velocity);
     f(Param{.name = "density", .help = "add a `density` fog grid (Blender's volume shader shows it without setup)", .flag = "--density"},

@@ -55,6 +55,7 @@ struct Settings {
   double half_band = SceneDefaults().half_band;      // narrow band half width, voxels (>= 3)
   double close_radius = 0;          // d_p: morphological closing (dilate, then erode) that fills gaps narrower than twice this
   int smooth_iterations = 0;        // OpenVDB LevelSetFilter mean-curvature iterations after the closing (not for kKernelSum)
+  double smooth_limit = 0;          // d_p: the smoothing moves the surface at most this far from the closed one (0 = no limit)
   bool velocity_grid = false;       // also build a `vel` vec3 grid
   bool density_grid = false;        // also build a `density` fog grid
   bool mesh = true;                 // extract the triangle mesh
