@@ -67,7 +67,10 @@ ToolsInherit::~ToolsInherit() { g_inherited_fd = -1; }
 
 std::string CommandLine(const fs::path& program, const std::vector<std::string>& args) {
   std::string line = Quote(program.string());
-  for (const auto& a : args) line += " " + Quote(a);
+  for (const auto& a : args) {
+    line += ' ';
+    line += Quote(a);
+  }
   return line;
 }
 
