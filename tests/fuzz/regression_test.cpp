@@ -13,6 +13,10 @@
 namespace fs = std::filesystem;
 
 namespace rime::fuzz {
+
+// In Target's own namespace, where gtest's argument printing finds it.
+void PrintTo(const Target& target, std::ostream* out) { *out << target.name; }
+
 namespace {
 
 void Replay(const Target& target, const std::string& kind) {
@@ -34,10 +38,10 @@ void Replay(const Target& target, const std::string& kind) {
     }
     EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count(), 10.0);
   }
-  if (kind == "corpus") EXPECT_GT(files, 0u) << "no seeds in " << folder;
+  if (kind == "corpus") {
+    EXPECT_GT(files, 0u) << "no seeds in " << folder;
+  }
 }
-
-void PrintTo(const Target& target, std::ostream* out) { *out << target.name; }
 
 class FuzzInputs : public ::testing::TestWithParam<Target> {};
 
