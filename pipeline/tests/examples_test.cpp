@@ -77,8 +77,11 @@ TEST(Examples, MeshScenesPointAtTheSharedMeshes) {
   if (!fs::exists(RIME_SHARED_DIR "/meshes")) GTEST_SKIP() << "../shared/meshes is absent: mesh paths not checked";
   for (const auto& file : ExampleScenes()) {
     const io::Scene scene = io::LoadScene(file);
-    for (const auto& solid : scene.solids)
-      if (solid.shape == io::SolidShape::kMesh) EXPECT_TRUE(fs::exists(scene.Resolve(solid.mesh))) << file << ": " << solid.mesh;
+    for (const auto& solid : scene.solids) {
+      if (solid.shape == io::SolidShape::kMesh) {
+        EXPECT_TRUE(fs::exists(scene.Resolve(solid.mesh))) << file << ": " << solid.mesh;
+      }
+    }
   }
 }
 

@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "rime/boundary/volume_kernels.h"
+#include "rime/core/hd.h"
 #include "rime/core/log.h"
 #include "rime/exec/kernel_list.h"
 #include "rime/exec/memory.h"
@@ -50,7 +51,7 @@ void BoundaryVolumesCpu(const neighbors::GridView<T>& grid, std::size_t cells, c
         for (std::uint32_t t = hood.begin[k]; t < hood.end[k]; ++t) {
           const T xj = sx[t], yj = sy[t], zj = sz[t];
           const std::uint32_t self = t - s0;  // lane t would be (wraps to a huge value when t < s0)
-#pragma GCC ivdep
+          RIME_IVDEP
           for (std::uint32_t l = 0; l < kLanes; ++l) {
             T r2;
             const T term = kernels::VolumeTerm(xi[l] - xj, yi[l] - yj, zi[l] - zj, inv_h, r2);

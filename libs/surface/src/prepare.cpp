@@ -6,6 +6,7 @@
 #include <cmath>
 
 #include "rime/core/error.h"
+#include "rime/core/hd.h"
 #include "rime/exec/parallel.h"
 #include "rime/neighbors/grid.h"
 #include "rime/surface/reconstruct.h"
@@ -80,7 +81,7 @@ struct LaneSums {
   template <bool kSecondMoments>
   void Add(float xj, float yj, float zj, std::uint32_t self, float support, const CubicSpline<float>& kernel) {
     const float r2max = support * support;
-#pragma GCC ivdep
+    RIME_IVDEP
     for (std::uint32_t l = 0; l < kSumLanes; ++l) {
       const float rx = xj - x[l], ry = yj - y[l], rz = zj - z[l];
       const float r2 = rx * rx + ry * ry + rz * rz;

@@ -21,6 +21,15 @@
 
 #define RIME_HDI RIME_HD inline
 
+// Before a loop over independent lanes: lets the compiler vectorise it without alias checks.
+#if defined(__clang__)
+#define RIME_IVDEP _Pragma("clang loop vectorize(assume_safety)")
+#elif defined(__GNUC__)
+#define RIME_IVDEP _Pragma("GCC ivdep")
+#else
+#define RIME_IVDEP
+#endif
+
 #include <cstdint>
 
 namespace rime {
