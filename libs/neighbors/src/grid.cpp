@@ -53,40 +53,6 @@ void CpuBounds(const Vec3<T>* points, Index n, Vec3<T>& lo, Vec3<T>& hi) {
   hi = box.finite ? box.hi : Vec3<T>(nan, nan, nan);
 }
 
-// The up to 27 occupied target cells around one query cell, in the kernels' order (the ranges
-// kernels::CellNeighborhood finds): read from the target's dense box where it has one, three
-// neighbouring words per row, instead of probing each cell around the cell's centre.
-template <class T>
-int NeighborCells(const GridView<T>& target, const GridView<T>& source, std::uint32_t cell, std::uint32_t (&begin)[27],
-                  std::uint32_t (&end)[27]) {
-  if (!target.dense_cells) {
-    const kernels::CellNeighborhood<T> hood(target, source, cell);
-    std::copy_n(hood.begin, hood.count, begin);
-    std::copy_n(hood.end, hood.count, end);
-    return hood.count;
-  }
-  const Vec3<T> p = source.points[source.sorted_index[source.cell_start[cell]]];
-  const std::int64_t cx = source.CellCoord(p.x, source.origin.x) - target.dense_lo[0];
-  const std::int64_t cy = source.CellCoord(p.y, source.origin.y) - target.dense_lo[1];
-  const std::int64_t cz = source.CellCoord(p.z, source.origin.z) - target.dense_lo[2];
-  int count = 0;
-  for (std::int64_t z = cz - 1; z <= cz + 1; ++z) {
-    if (z < 0 || z >= target.dense_dims[2]) continue;
-    for (std::int64_t y = cy - 1; y <= cy + 1; ++y) {
-      if (y < 0 || y >= target.dense_dims[1]) continue;
-      const std::uint32_t* row = target.dense_cells + (z * target.dense_dims[1] + y) * target.dense_dims[0];
-      for (std::int64_t x = std::max<std::int64_t>(cx - 1, 0), x_end = std::min(cx + 2, target.dense_dims[0]); x < x_end; ++x) {
-        const std::uint32_t t = row[x];
-        if (t == GridView<T>::kNoCell) continue;
-        begin[count] = target.cell_start[t];
-        end[count] = target.cell_start[t + 1];
-        ++count;
-      }
-    }
-  }
-  return count;
-}
-
 // The candidates of one query cell (the points of its up to 27 neighbor cells, in the order the
 // kernels visit them) as padded structure-of-arrays. Padding points lie far away, so blocks of
 // kLanes candidates need no tail handling.
@@ -152,8 +118,9 @@ struct CellCandidates {
 
   /// `in_order`: the target's sorted slot k holds point k, so a cell's points are read as a block.
   void Gather(const GridView<T>& target, const GridView<T>& source, std::uint32_t cell, bool in_order) {
-    std::uint32_t begin[27], end[27];
-    const int cells = NeighborCells(target, source, cell, begin, end);
+    const kernels::CellNeighborhood<T> hood(target, source, cell);
+    const int cells = hood.count;
+    const std::uint32_t *begin = hood.begin, *end = hood.end;
     count = 0;
     for (int k = 0; k < cells; ++k) count += end[k] - begin[k];
     padded = (count + kLanes - 1) / kLanes * kLanes;

@@ -235,6 +235,20 @@ struct CellNeighborhood {
   RIME_HDI CellNeighborhood(const GridView<T>& target, const GridView<T>& source, std::uint32_t cell) {
     const T size = T(1) / source.inv_cell;
     const Vec3<T> p = source.points[source.sorted_index[source.cell_start[cell]]];
+    if (target.dense_cells) {  // the 27 cells straight from the dense box, in the same order
+      const std::int64_t cx = source.CellCoord(p.x, source.origin.x), cy = source.CellCoord(p.y, source.origin.y),
+                         cz = source.CellCoord(p.z, source.origin.z);
+      for (std::int64_t z = cz - 1; z <= cz + 1; ++z)
+        for (std::int64_t y = cy - 1; y <= cy + 1; ++y)
+          for (std::int64_t x = cx - 1; x <= cx + 1; ++x) {
+            const std::uint32_t c = target.DenseCell(x, y, z);
+            if (c == GridView<T>::kNoCell) continue;
+            begin[count] = target.cell_start[c];
+            end[count] = target.cell_start[c + 1];
+            ++count;
+          }
+      return;
+    }
     const Vec3<T> center(source.origin.x + (T(source.CellCoord(p.x, source.origin.x)) + T(0.5)) * size,
                          source.origin.y + (T(source.CellCoord(p.y, source.origin.y)) + T(0.5)) * size,
                          source.origin.z + (T(source.CellCoord(p.z, source.origin.z)) + T(0.5)) * size);
