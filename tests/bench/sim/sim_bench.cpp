@@ -94,14 +94,6 @@ void FreezeBlock(sph::Simulation<float>& sim, double dp, double ice_top) {
   sim.Restore(f);
 }
 
-// CPU seconds of the whole process so far (every thread): on a shared machine the work a phase
-// costs, where wall time also counts the waiting.
-double CpuSeconds() {
-  rusage usage{};
-  getrusage(RUSAGE_SELF, &usage);
-  return double(usage.ru_utime.tv_sec + usage.ru_stime.tv_sec) + 1e-6 * double(usage.ru_utime.tv_usec + usage.ru_stime.tv_usec);
-}
-
 Result Run(const std::string& name, const io::Scene& scene, int warmup, int steps, int repeats, bool frozen = false) {
   Result r;
   r.name = name;
@@ -114,10 +106,10 @@ Result Run(const std::string& name, const io::Scene& scene, int warmup, int step
     sim.EnableTimings(true);
     std::int64_t iterations = 0;
     const auto t0 = std::chrono::steady_clock::now();
-    const double cpu0 = CpuSeconds();
+    const double cpu0 = test::ProcessCpuSeconds();
     for (int s = 0; s < steps; ++s) iterations += sim.Step(0.001).pressure_iterations;
     const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    cpu.push_back(1e3 * (CpuSeconds() - cpu0) / steps);
+    cpu.push_back(1e3 * (test::ProcessCpuSeconds() - cpu0) / steps);
     const auto& t = sim.timings();
     ms.push_back(1e3 * wall / steps);
     nb.push_back(1e3 * t.neighbor_search / steps);
