@@ -52,10 +52,12 @@ std::int64_t LastCompleteFrame(const fs::path& folder) {
 
 // Writes output frames on a background thread, so that HDF5 compression and disk writes overlap
 // the next frame's steps (the snapshot itself is taken on the simulation thread). One write is in
-// flight at a time and each job writes the frame before the sequence index and the stats log that
-// list it, so a frame is listed only once it is complete. A failed write (disk full) is rethrown
-// by the next Submit or by Finish; if the simulation stops with an error first, the destructor
-// still waits for the write in flight, so every frame it reported as complete is on disk.
+// flight at a time. Each job writes the stats log first, then the frame, then the sequence index:
+// the index lists a frame only once it is complete, and the stats log always holds a line for
+// every complete frame (a resume keeps the lines up to its frame and drops any newer one). A
+// failed write (disk full) is rethrown by the next Submit or by Finish; if the simulation stops
+// with an error first, the destructor still waits for the write in flight, so every frame it
+// reported as complete is on disk.
 class FrameWriter {
  public:
   FrameWriter() = default;
@@ -207,9 +209,9 @@ int Run(const rime::io::Scene& scene, const Options& opt, const rime::tool::Comm
     std::string stats_text;
     for (const std::string& l : stats_lines) stats_text += l + "\n";
     writer.Submit([frame = sim.Snapshot(f), index, stats_text, &out, &stats_path, path = index.back().frame_file] {
+      WriteFileAtomically(stats_path, stats_text);
       io::WriteParticleFrame(path, frame);
       io::WriteSequenceIndex(out / "particles.h5part", index);
-      WriteFileAtomically(stats_path, stats_text);
     });
     total_steps += steps;
     total_iterations += iterations;

@@ -2,10 +2,12 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <filesystem>
 #include <fstream>
 
 #include "rime/io/particles.h"
+#include "rime/test/bake_outputs.h"
 #include "rime/test/files.h"
 #include "rime/test/run_command.h"
 #include "rime/test/temp_folder.h"
@@ -111,6 +113,22 @@ TEST_F(SimTool, ResumeReproducesTheUninterruptedFrames) {
   ASSERT_EQ(a.attributes.size(), b.attributes.size());
   for (const auto& [name, data] : a.attributes) EXPECT_TRUE(b.attributes.at(name) == data) << name << " differs after resume";
   EXPECT_GT(a.numbers.at("ice_particles"), 0) << "the scene must exercise freezing so that its state is part of the check";
+}
+
+// A kill can land after a frame's stats line is written and before the frame itself: the resume
+// starts from the last frame on disk, drops the newer line and writes it again, so the log keeps
+// exactly one line per frame, equal to an uninterrupted run's.
+TEST_F(SimTool, ResumeAfterAKillBeforeTheFrameKeepsOneStatsLinePerFrame) {
+  const fs::path scene = WriteScene("");
+  MakeBoundary(scene);
+  ASSERT_EQ(Exec(Sim(scene, "full", "-j 2")).code, 0);
+  ASSERT_EQ(Exec(Sim(scene, "resumed", "-j 2 --end-time 0.1")).code, 0);
+  ASSERT_TRUE(fs::remove(dir_ / "resumed" / "particles.0003.h5part"));
+  const Result r = Exec(Sim(scene, "resumed", "-j 2 --resume"));
+  ASSERT_EQ(r.code, 0) << r.output;
+  const std::string full = rime::test::ComparableBytes(dir_ / "full" / "stats.jsonl", dir_ / "full");
+  EXPECT_EQ(std::count(full.begin(), full.end(), '\n'), 6) << full;
+  EXPECT_EQ(rime::test::ComparableBytes(dir_ / "resumed" / "stats.jsonl", dir_ / "resumed"), full);
 }
 
 TEST_F(SimTool, CudaWithoutGpuIsRefused) {
