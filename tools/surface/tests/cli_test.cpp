@@ -212,6 +212,38 @@ TEST_F(Cli, MemoryEstimateBoundsThePeakOfWaterAtAFineVoxel) {
   EXPECT_GT(estimate, peak);
 }
 
+// On a small frame the process's own memory decides the peak: a ball of about 3,300 water
+// particles (the default example's count) at its default settings, two threads.
+TEST_F(Cli, MemoryEstimateBoundsThePeakOfASmallFrame) {
+  rime::io::ParticleFrame frame;
+  frame.spacing = 0.02;
+  frame.frame = 1;
+  std::vector<rime::Vec3f> positions;
+  for (int i = -9; i <= 9; ++i)
+    for (int j = -9; j <= 9; ++j)
+      for (int k = -9; k <= 9; ++k)
+        if (i * i + j * j + k * k <= 85) positions.push_back(rime::Vec3f(i, j, k) * 0.02f);
+  const std::size_t n = positions.size();
+  frame.SetPositions(positions);
+  for (const char* v : {"vx", "vy", "vz"}) frame.Set(v, std::vector<float>(n, 0.0f));
+  frame.Set("phase", std::vector<std::uint8_t>(n, 0));
+  rime::io::WriteParticleFrame(Frame(1), frame);
+  const std::string args = Frame(1).string() + " -o " + Out() + " -j 2 --phase water";
+  const RunResult refused = Execute(args + " --memory-budget 1");
+  ASSERT_EQ(refused.code, 10) << refused.output;
+  const double estimate = NeededBytes(refused.output);
+  ASSERT_GT(estimate, 0) << refused.output;
+  const RunResult ran = Execute(args + " --json-summary " + (dir_ / "summary.json").string());
+  ASSERT_EQ(ran.code, 0) << ran.output;
+  const std::string summary = rime::test::ReadFile(dir_ / "summary.json");
+  const auto key = summary.find("\"peak_memory_bytes\":");
+  ASSERT_NE(key, std::string::npos) << summary;
+  const double peak = std::stod(summary.substr(key + 20));
+  std::printf("water ball, %zu particles: estimate %.1f MiB, measured peak %.1f MiB (estimate / peak %.2f)\n", n, estimate / 1048576,
+              peak / 1048576, estimate / peak);
+  EXPECT_GT(estimate, peak);
+}
+
 TEST_F(Cli, RefusesMalformedMemoryBudgetAndPathsOutsideTheSandbox) {
   rime::io::WriteParticleFrame(Frame(1), MakeFrame(1, true));
   const RunResult bad = Execute(Frame(1).string() + " -o " + Out() + " --memory-budget 4X");
