@@ -17,8 +17,8 @@ struct SimulationCounts {
 /// until it stops or the scene ends (particles leaving the domain are not subtracted).
 double ExpectedFluidParticles(const io::Scene& scene);
 
-/// Peak resident bytes: per-particle arrays, neighbour lists at about 40 fluid and 20 boundary
-/// neighbours per water particle, and the frame snapshot being written. Calibrated against
+/// Peak resident bytes: per-particle arrays, neighbour lists (and the search's staged matches) at
+/// about 40 fluid and 20 boundary neighbours per water particle, and the frame snapshot being written. Calibrated against
 /// measured peaks in docs/reliability.md.
 double EstimateSimulationBytes(const SimulationCounts& counts);
 

@@ -193,6 +193,30 @@ TEST_F(SimTool, RefusesAboveTheMemoryBudgetBeforeWritingAFrame) {
   EXPECT_FALSE(fs::exists(dir_ / "sim"));
 }
 
+// The estimate must bound the measured peak where the process's own memory weighs most: a small
+// dense scene (about 9.4 k water and 67 k boundary particles at 1 cm), freezing on, two threads.
+TEST_F(SimTool, MemoryEstimateBoundsThePeakOfASmallScene) {
+  fs::path scene = WriteScene("", 0.004, 500);
+  std::string text = rime::test::ReadFile(scene);
+  text.replace(text.find("spacing = 0.04"), 14, "spacing = 0.01");
+  rime::test::WriteFile(scene, text);
+  MakeBoundary(scene);
+  const Result refused = Exec(Sim(scene, "refused", "-j 2 --memory-budget 1"));
+  ASSERT_EQ(refused.code, 10) << refused.output;
+  const auto at = refused.output.find("needs about ");
+  ASSERT_NE(at, std::string::npos) << refused.output;
+  const double estimate_mib = std::stod(refused.output.substr(at + 12));
+  ASSERT_NE(refused.output.find(" MiB for "), std::string::npos) << refused.output;
+  const Result ran = Exec(Sim(scene, "sim", "-j 2 --json-summary " + (dir_ / "summary.json").string()));
+  ASSERT_EQ(ran.code, 0) << ran.output;
+  const std::string summary = rime::test::ReadFile(dir_ / "summary.json");
+  const auto key = summary.find("\"peak_memory_bytes\":");
+  ASSERT_NE(key, std::string::npos) << summary;
+  const double peak_mib = std::stod(summary.substr(key + 20)) / 1048576;
+  std::printf("estimate %.1f MiB, measured peak %.1f MiB (measured / estimated %.2f)\n", estimate_mib, peak_mib, peak_mib / estimate_mib);
+  EXPECT_GT(estimate_mib, peak_mib);
+}
+
 TEST_F(SimTool, SandboxRefusesBoundaryAndOutputOutsideIt) {
   const fs::path scene = WriteScene("");
   MakeBoundary(scene);
