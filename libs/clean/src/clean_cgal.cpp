@@ -28,14 +28,13 @@
 #include <CGAL/Surface_mesh_simplification/edge_collapse.h>
 #include <fmt/format.h>
 
-#include <time.h>
-
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <numbers>
 #include <tuple>
 
+#include "rime/core/cpu_time.h"
 #include "rime/core/error.h"
 #include "rime/core/log.h"
 #include "rime/clean/clean.h"
@@ -53,12 +52,6 @@ using HalfedgeIndex = Mesh::Halfedge_index;
 namespace PMP = CGAL::Polygon_mesh_processing;
 namespace SMS = CGAL::Surface_mesh_simplification;
 namespace params = CGAL::parameters;
-
-double ProcessCpuSeconds() {
-  timespec t{};
-  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t);
-  return double(t.tv_sec) + 1e-9 * double(t.tv_nsec);
-}
 
 bool RepeatsVertex(const std::array<std::uint32_t, 3>& t) { return t[0] == t[1] || t[1] == t[2] || t[0] == t[2]; }
 

@@ -6,7 +6,6 @@
 
 #include <stdlib.h>
 #include <sys/resource.h>
-#include <time.h>
 
 #include <algorithm>
 #include <array>
@@ -16,6 +15,8 @@
 #include <string>
 #include <thread>
 #include <vector>
+
+#include "rime/core/cpu_time.h"
 
 namespace rime::test {
 
@@ -37,13 +38,7 @@ class Stopwatch {
   std::chrono::steady_clock::time_point start_ = std::chrono::steady_clock::now();
 };
 
-/// CPU seconds (user and system, all threads) of this process so far: on a machine shared with
-/// other work wall time overstates the cost; CPU time divided by threads is the per-core figure.
-inline double ProcessCpuSeconds() {
-  timespec t{};
-  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t);
-  return double(t.tv_sec) + 1e-9 * double(t.tv_nsec);
-}
+using ::rime::ProcessCpuSeconds;  // rime/core/cpu_time.h
 
 /// CPU seconds (user and system) in a resource usage, e.g. a child's from wait4.
 inline double CpuSeconds(const rusage& usage) {
