@@ -53,6 +53,10 @@ int main(int argc, char** argv) {
       "logs and the bake state to <output>/cache."};
   tool::CommonOptions common;
   tool::Setup(app, "rime-bake", common, tool::kDevice | tool::kFrames | tool::kJsonSummary | tool::kMemoryBudget | tool::kSandbox);
+  app.get_option("--frames")
+      ->description(
+          "Frame range A-B (or a single frame A) of the per-frame stages (surface, clean, preview); the simulation "
+          "always computes every frame to the scene's end_time. Default: all");
   app.get_option("--memory-budget")
       ->description(
           "Passed to every stage tool, which refuses to start (exit 10, nothing written) when the peak memory it "
