@@ -110,10 +110,19 @@ void MeasureMesh(const io::TriMesh& mesh, const std::vector<Vec3f>& solid, doubl
   const double mean_edge = edge_sum / double(3 * m.triangles);
   m.smoothing_passes = int(std::clamp(std::round(s.smoothing_passes * std::pow(0.5 * dp / mean_edge, 2)), 1.0, 500.0));
   const std::vector<Vec3d> smooth = TaubinSmoothed(mesh, m.smoothing_passes);
+  // Only the displacement along the surface normal is a distance between the two surfaces: the
+  // uniform Laplacian also slides vertices along the surface wherever the triangles are uneven.
+  std::vector<Vec3d> normal(nv, Vec3d(0, 0, 0));
+  for (const auto& t : mesh.triangles) {
+    const Vec3d area_normal = Cross(Vec3d(mesh.positions[t[1]] - mesh.positions[t[0]]), Vec3d(mesh.positions[t[2]] - mesh.positions[t[0]]));
+    for (std::uint32_t v : t) normal[v] += area_normal;
+  }
   double sum = 0, weight = 0;
   for (std::size_t v = 0; v < nv; ++v) {
-    const Vec3d d = Vec3d(mesh.positions[v]) - smooth[v];
-    sum += vertex_area[v] * Dot(d, d);
+    const double length = Norm(normal[v]);
+    if (!(length > 0)) continue;
+    const double d = Dot(Vec3d(mesh.positions[v]) - smooth[v], normal[v]) / length;
+    sum += vertex_area[v] * d * d;
     weight += vertex_area[v];
   }
   m.noise_rms = weight > 0 ? std::sqrt(sum / weight) / dp : 0;

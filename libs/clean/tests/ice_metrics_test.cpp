@@ -2,6 +2,7 @@
 
 #include <cmath>
 #include <functional>
+#include <random>
 
 #include "rime/clean/ice_metrics.h"
 #include "rime/clean/procedural.h"
@@ -72,6 +73,27 @@ TEST(IceMetrics, ParticleScaleBumpsAreNoise) {
   EXPECT_GT(n.noise_rms, 0.05);
   EXPECT_GT(n.noise_rms, 10 * s.noise_rms);
   EXPECT_GT(n.sharp_area_fraction, 0.2);
+}
+
+TEST(IceMetrics, VerticesSlidAlongTheSurfaceAreNotNoise) {
+  // The smooth ball with every vertex moved along the sphere by up to 0.3 edges: uneven triangles
+  // (as a decimated mesh has) over the same smooth surface read as smooth, not as bumps.
+  FrameBuilder b;
+  b.Solid({0, 0, 0}, false);
+  const Vec3d center{0, 0, 10 * kSpacing};
+  const io::TriMesh smooth = Icosphere(10 * kSpacing, 5, center);
+  io::TriMesh slid = smooth;
+  const double edge = Norm(Vec3d(smooth.positions[smooth.triangles[0][1]] - smooth.positions[smooth.triangles[0][0]]));
+  std::mt19937_64 rng(12345);
+  std::uniform_real_distribution<double> uniform(-0.3 * edge, 0.3 * edge);
+  for (auto& p : slid.positions) {
+    const Vec3d moved = Vec3d(p) - center + Vec3d(uniform(rng), uniform(rng), uniform(rng));
+    p = Vec3f(center + moved * (10 * kSpacing / Norm(moved)));
+  }
+  const IceMetrics s = MeasureIce(smooth, b.Build(), kGravity, {}, {});
+  const IceMetrics m = MeasureIce(slid, b.Build(), kGravity, {}, {});
+  EXPECT_LT(m.noise_rms, 0.025);
+  EXPECT_LT(m.noise_rms, 2 * s.noise_rms + 0.005);
 }
 
 TEST(IceMetrics, FloatingPieceIsASpeckAndSmallPieceIsTiny) {

@@ -107,8 +107,8 @@ struct SurfaceSettings {
             .unit = "iterations",
             .range = Range::Closed(0, 100),
             .help = "OpenVDB level-set mean-curvature smoothing after the closing, for the ellipsoids and isotropic fields",
-            .doc = "(ice); removes particle-sized bumps (10 takes the sphere drop's noise from 0.081 to 0.049 d_p, "
-                   "[ice-look.md](ice-look.md))",
+            .doc = "(ice); removes particle-sized bumps and lets lone beads shrink away, while more steps thin sheets one "
+                   "particle thick ([ice-look.md](ice-look.md))",
             .flag = "--smooth"},
       s.smooth);
     f(Param{.name = "smooth_limit",
