@@ -10,6 +10,7 @@
 #include "rime/test/bake_outputs.h"
 #include "rime/test/files.h"
 #include "rime/test/run_command.h"
+#include "rime/test/sanitizers.h"
 #include "rime/test/temp_folder.h"
 
 namespace fs = std::filesystem;
@@ -196,6 +197,7 @@ TEST_F(SimTool, RefusesAboveTheMemoryBudgetBeforeWritingAFrame) {
 // The estimate must bound the measured peak where the process's own memory weighs most: a small
 // dense scene (about 9.4 k water and 67 k boundary particles at 1 cm), freezing on, two threads.
 TEST_F(SimTool, MemoryEstimateBoundsThePeakOfASmallScene) {
+  if (rime::test::kAddressSanitizer) GTEST_SKIP() << rime::test::kMemorySkipReason;
   fs::path scene = WriteScene("", 0.004, 500);
   std::string text = rime::test::ReadFile(scene);
   text.replace(text.find("spacing = 0.04"), 14, "spacing = 0.01");

@@ -14,6 +14,7 @@
 #include "rime/io/particles.h"
 #include "rime/test/files.h"
 #include "rime/test/run_command.h"
+#include "rime/test/sanitizers.h"
 #include "rime/test/temp_folder.h"
 
 namespace {
@@ -215,6 +216,7 @@ TEST_F(Cli, MemoryEstimateBoundsThePeakOfWaterAtAFineVoxel) {
 // On a small frame the process's own memory decides the peak: a ball of about 3,300 water
 // particles (the default example's count) at its default settings, two threads.
 TEST_F(Cli, MemoryEstimateBoundsThePeakOfASmallFrame) {
+  if (rime::test::kAddressSanitizer) GTEST_SKIP() << rime::test::kMemorySkipReason;
   rime::io::ParticleFrame frame;
   frame.spacing = 0.02;
   frame.frame = 1;
