@@ -3,6 +3,10 @@
 
 #include <algorithm>
 #include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <vector>
 
 #include "rime/core/error.h"
 #include "rime/io/scene.h"
@@ -49,6 +53,42 @@ TEST(Examples, DefaultSceneIsProceduralAndFreezes) {
   EXPECT_GT(particles, 500);
   EXPECT_LT(particles, 20000);
   EXPECT_LE(scene.info.end_time, 3.0);
+}
+
+/// The TOML settings of `text` without comments and blank lines, one per line, trimmed.
+std::vector<std::string> Settings(const std::string& text) {
+  std::vector<std::string> lines;
+  std::istringstream in(text);
+  for (std::string line; std::getline(in, line);) {
+    line = line.substr(0, line.find('#'));
+    const auto first = line.find_first_not_of(" \t"), last = line.find_last_not_of(" \t\r");
+    if (first != std::string::npos) lines.push_back(line.substr(first, last - first + 1));
+  }
+  return lines;
+}
+
+std::string ReadText(const fs::path& path) {
+  std::ifstream in(path);
+  std::ostringstream text;
+  text << in.rdbuf();
+  return text.str();
+}
+
+// README's annotated scene is the shipped default example, setting for setting (comments differ).
+TEST(Examples, ReadmeAnnotatesTheDefaultSceneAsShipped) {
+  const std::string readme = ReadText(RIME_SOURCE_DIR "/README.md");
+  const auto section = readme.find("## A scene, annotated");
+  ASSERT_NE(section, std::string::npos);
+  const auto begin = readme.find("```toml\n", section);
+  ASSERT_NE(begin, std::string::npos);
+  const auto end = readme.find("```", begin + 8);
+  ASSERT_NE(end, std::string::npos);
+  const auto shown = Settings(readme.substr(begin + 8, end - begin - 8));
+  const auto shipped = Settings(ReadText(RIME_SOURCE_DIR "/examples/default.toml"));
+  ASSERT_FALSE(shipped.empty());
+  for (std::size_t i = 0; i < std::max(shown.size(), shipped.size()); ++i)
+    ASSERT_EQ(i < shown.size() ? shown[i] : "(end of README's block)", i < shipped.size() ? shipped[i] : "(end of the file)")
+        << "setting " << i + 1 << " of README's annotated scene differs from examples/default.toml";
 }
 
 // Dam break (validation): a 1 x 1 x 1 m block in the corner of a 4 x 3 x 1.5 m open tank, with the
