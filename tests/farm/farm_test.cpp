@@ -395,7 +395,7 @@ TEST_F(Farm, PreviewFramesAndMovieRunOnTheFarm) {
 TEST_F(Farm, CancelLeavesNoJobAndNothingThatLooksFinished) {
   if (!ClusterUp()) GTEST_SKIP() << cluster_problem_;
   const std::string farm = "clean --farm-config " + (root_ / "site.toml").string();
-  setenv("FAKE_SIM_SLEEP", "2", 1);  // the simulation takes about 8 s
+  setenv("FAKE_SIM_SLEEP", "5", 1);  // about 20 s: the cancel lands while it runs, even on a loaded machine
   ASSERT_EQ(RunBake("fake.toml", root_ / "out", farm + " --farm slurm", true), 0) << output_;
   unsetenv("FAKE_SIM_SLEEP");
   std::set<std::string> ours;
