@@ -3,13 +3,13 @@
 
 #include <algorithm>
 #include <filesystem>
-#include <fstream>
 #include <sstream>
 #include <string>
 #include <vector>
 
 #include "rime/core/error.h"
 #include "rime/io/scene.h"
+#include "rime/test/files.h"
 #include "scene_document.h"
 
 namespace fs = std::filesystem;
@@ -67,16 +67,9 @@ std::vector<std::string> Settings(const std::string& text) {
   return lines;
 }
 
-std::string ReadText(const fs::path& path) {
-  std::ifstream in(path);
-  std::ostringstream text;
-  text << in.rdbuf();
-  return text.str();
-}
-
 // README's annotated scene is the shipped default example, setting for setting (comments differ).
 TEST(Examples, ReadmeAnnotatesTheDefaultSceneAsShipped) {
-  const std::string readme = ReadText(RIME_SOURCE_DIR "/README.md");
+  const std::string readme = test::ReadFile(RIME_SOURCE_DIR "/README.md");
   const auto section = readme.find("## A scene, annotated");
   ASSERT_NE(section, std::string::npos);
   const auto begin = readme.find("```toml\n", section);
@@ -84,7 +77,7 @@ TEST(Examples, ReadmeAnnotatesTheDefaultSceneAsShipped) {
   const auto end = readme.find("```", begin + 8);
   ASSERT_NE(end, std::string::npos);
   const auto shown = Settings(readme.substr(begin + 8, end - begin - 8));
-  const auto shipped = Settings(ReadText(RIME_SOURCE_DIR "/examples/default.toml"));
+  const auto shipped = Settings(test::ReadFile(RIME_SOURCE_DIR "/examples/default.toml"));
   ASSERT_FALSE(shipped.empty());
   for (std::size_t i = 0; i < std::max(shown.size(), shipped.size()); ++i)
     ASSERT_EQ(i < shown.size() ? shown[i] : "(end of README's block)", i < shipped.size() ? shipped[i] : "(end of the file)")

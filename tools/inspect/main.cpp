@@ -46,6 +46,7 @@ nlohmann::json ToJson(std::int64_t frame, double time, const clean::IceMetrics& 
           {"noise_rms_dp", m.noise_rms},
           {"noise_smoothing_passes", m.smoothing_passes},
           {"sharp_area_fraction", m.sharp_area_fraction},
+          {"volume_ratio", m.volume_ratio},
           {"wetted_solid_particles", m.wetted},
           {"covered_solid_particles", m.covered},
           {"glaze_coverage", m.glaze_coverage},

@@ -84,10 +84,12 @@ void MeasureMesh(const io::TriMesh& mesh, const std::vector<Vec3f>& solid, doubl
   // Per-vertex area (a third of each incident triangle) and the cotangent mean-curvature normal.
   std::vector<double> vertex_area(nv, 0.0);
   std::vector<Vec3d> curvature_normal(nv, Vec3d(0, 0, 0));
+  double volume = 0;  // divergence theorem, signed; exact for the closed meshes rime-clean writes
   for (const auto& t : mesh.triangles) {
     const Vec3d p[3] = {Vec3d(mesh.positions[t[0]]), Vec3d(mesh.positions[t[1]]), Vec3d(mesh.positions[t[2]])};
     const double area = 0.5 * Norm(Cross(p[1] - p[0], p[2] - p[0]));
     m.area += area;
+    volume += Dot(p[0], Cross(p[1], p[2])) / 6;
     for (int k = 0; k < 3; ++k) vertex_area[t[k]] += area / 3;
     if (!(area > 0)) continue;
     for (int k = 0; k < 3; ++k) {  // the angle at corner k weighs the opposite edge (i, j)
@@ -103,6 +105,7 @@ void MeasureMesh(const io::TriMesh& mesh, const std::vector<Vec3f>& solid, doubl
   for (std::size_t v = 0; v < nv; ++v)
     if (vertex_area[v] > 0 && Norm(curvature_normal[v]) / (2 * vertex_area[v]) * dp > s.sharp_curvature) sharp += vertex_area[v];
   m.sharp_area_fraction = m.area > 0 ? sharp / m.area : 0;
+  m.volume_ratio = m.ice > 0 ? volume / (double(m.ice) * dp * dp * dp) : 0;
 
   double edge_sum = 0;
   for (const auto& t : mesh.triangles)

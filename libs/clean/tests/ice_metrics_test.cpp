@@ -61,6 +61,17 @@ TEST(IceMetrics, SmoothSphereHasNoNoiseNoHandlesAndOnePiece) {
   EXPECT_NEAR(m.area, 4 * 3.14159265 * std::pow(10 * kSpacing, 2), 0.02 * 4 * 3.14159265 * std::pow(10 * kSpacing, 2));
 }
 
+// The volume ratio compares what the mesh encloses with what the ice particles stand for.
+TEST(IceMetrics, VolumeRatioIsTheMeshVolumeOverTheIceParticles) {
+  FrameBuilder b;
+  b.Solid({0, 0, 0}, false);
+  for (int i = 0; i < 1000; ++i) b.Ice({0, 0, 10 * kSpacing});  // 1000 d_p³
+  const double radius = std::cbrt(1000 * std::pow(kSpacing, 3) * 3 / (4 * 3.14159265));
+  const IceMetrics m = MeasureIce(Icosphere(radius, 4, {0, 0, 10 * kSpacing}), b.Build(), kGravity, {}, {});
+  EXPECT_NEAR(m.volume_ratio, 1.0, 0.02);  // the icosphere's facets hold slightly less than the ball
+  EXPECT_EQ(MeasureIce({}, b.Build(), kGravity, {}, {}).volume_ratio, 0.0);
+}
+
 TEST(IceMetrics, ParticleScaleBumpsAreNoise) {
   // The same ball with bumps of a particle's size: the noise and the sharp area rise well above it.
   FrameBuilder b;

@@ -56,6 +56,7 @@ struct IceMetrics {
   double noise_rms = 0;            // d_p: area-weighted RMS distance to the Taubin-smoothed copy
   int smoothing_passes = 0;        // Taubin passes used for noise_rms (from the mean edge length)
   double sharp_area_fraction = 0;  // of the area, where |H|·d_p > sharp_curvature
+  double volume_ratio = 0;         // enclosed volume / (ice particles × d_p³): what the surfacing kept
   // From the particles.
   std::size_t water = 0, ice = 0, floating_ice = 0;  // floating: ice connected to no solid
   std::size_t wetted = 0;                            // solid particles of the measured objects with a water film
