@@ -9,6 +9,7 @@
 #include <cmath>
 #include <cstdio>
 #include <set>
+#include <span>
 #include <vector>
 
 #include "rime/clean/clean.h"
@@ -39,16 +40,14 @@ io::ParticleFrame Bake(const io::Scene& scene) {
 }
 
 // Drips are chaotic: nudging the first nozzle's speed by 2.5e-4 of itself, or building with other
-// rounding (the sanitizer preset), moves where water leaves the edge and the icicles with it (0 to 5
-// hanging icicles over eleven nudged bakes of the default ledge). Bounds on how much ice hangs
-// therefore hold for the median of a few nudged bakes, what a user sees over several takes.
+// rounding (the sanitizer preset), moves where water leaves the edge and the icicles with it
+// (docs/ice-look.md). Bounds on how much ice hangs therefore hold for the median of nudged takes.
 constexpr double kLedgeNudges[] = {0, -2.5e-4, 2.5e-4, -5e-4, 5e-4, -7.5e-4, 7.5e-4};
 constexpr double kEaveNudges[] = {0, -2.5e-4, 2.5e-4, -5e-4, 5e-4};
 
-template <std::size_t N>
-std::vector<io::Scene> Nudged(const io::Scene& scene, const double (&nudges)[N]) {
-  std::vector<io::Scene> takes(N, scene);
-  for (std::size_t k = 0; k < N; ++k) takes[k].emitters.at(0).speed *= 1 + nudges[k];
+std::vector<io::Scene> Nudged(const io::Scene& scene, std::span<const double> nudges) {
+  std::vector<io::Scene> takes(nudges.size(), scene);
+  for (std::size_t k = 0; k < nudges.size(); ++k) takes[k].emitters.at(0).speed *= 1 + nudges[k];
   return takes;
 }
 
