@@ -92,15 +92,22 @@ void ListRows(const exec::Device& device, const Particles<T>& particles, T suppo
   // An empty pool takes the lists' storage (storing them onto themselves) rather than a copy.
   if (work.row_pool_used == 0) work.row_pool.swap(work.new_rows.indices);
   work.row_pool.resize(work.row_pool_used + pairs);
+  work.row_x_grad.resize(work.row_pool_used + pairs);
+  work.row_denominator.resize(work.row_pool_used + pairs);
   const std::uint32_t* indices = work.row_pool_used == 0 ? work.row_pool.data() : work.new_rows.indices.data();
   exec::ParallelFor(device, rowless,
-                    kernels::StoreRows{.list = work.row_list.data(),
-                                       .offsets = work.new_rows.offsets.data(),
-                                       .indices = indices,
-                                       .base = std::uint32_t(work.row_pool_used),
-                                       .begin = work.row_begin.data(),
-                                       .length = work.row_length.data(),
-                                       .pool = work.row_pool.data()});
+                    kernels::StoreRows<T>{.list = work.row_list.data(),
+                                          .offsets = work.new_rows.offsets.data(),
+                                          .indices = indices,
+                                          .base = std::uint32_t(work.row_pool_used),
+                                          .x = particles.boundary_x,
+                                          .kernel = CubicSpline<T>(support / 2),
+                                          .epsilon = T(particles.viscosity_epsilon),
+                                          .begin = work.row_begin.data(),
+                                          .length = work.row_length.data(),
+                                          .pool = work.row_pool.data(),
+                                          .x_grad = work.row_x_grad.data(),
+                                          .denominator = work.row_denominator.data()});
   work.row_pool_used += pairs;
   work.new_rows.indices.release();  // scratch that may hold a whole listing (or the pool's old storage)
   if (work.row_pool_after_reset == 0 || reset) {
@@ -282,12 +289,10 @@ Index FreezeStep(const exec::Device& device, const io::Scene& scene, const Parti
         ListRows(device, particles, support, list, count, work, slot);
         exec::ParallelFor(device, count,
                           kernels::FilmLaplacian<T>{.list = list,
-                                                    .x = particles.boundary_x,
-                                                    .rows = {work.row_begin.data(), work.row_length.data(), work.row_pool.data()},
+                                                    .rows = {work.row_begin.data(), work.row_length.data(), work.row_pool.data(),
+                                                             work.row_x_grad.data(), work.row_denominator.data()},
                                                     .volume = particles.boundary_volume,
                                                     .film = film.film.data(),
-                                                    .kernel = kernel,
-                                                    .epsilon = T(particles.viscosity_epsilon),
                                                     .laplacian = work.laplacian.data(),
                                                     .lambda = work.lambda.data()});
       };

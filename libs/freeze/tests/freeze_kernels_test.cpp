@@ -55,19 +55,33 @@ TEST(FreezeKernels, FilmDiffusionConservesAndKeepsBounds) {
   grid.Build(dx.data(), nb, 2 * kH);
   neighbors::NeighborList near(cpu);
   grid.Query(dx.data(), nb, 2 * kH, false, near);
-  const auto offsets = near.offsets.ToHost();
-  std::vector<std::uint32_t> lengths(nb);
-  for (Index b = 0; b < nb; ++b) lengths[b] = offsets[b + 1] - offsets[b];
-  DeviceArray<std::uint32_t> row_length(cpu, lengths);
-  const kernels::NeighborRows rows{near.offsets.data(), row_length.data(), near.indices.data()};
+  DeviceArray<std::uint32_t> row_begin(cpu, nb), row_length(cpu, nb), pool(cpu, near.pairs());
+  DeviceArray<double> x_grad(cpu, near.pairs()), denominator(cpu, near.pairs());
   const CubicSpline<double> kernel(kH);
+  exec::cpu::ParallelFor(nb, kernels::StoreRows<double>{.list = list.data(),
+                                                        .offsets = near.offsets.data(),
+                                                        .indices = near.indices.data(),
+                                                        .base = 0,
+                                                        .x = dx.data(),
+                                                        .kernel = kernel,
+                                                        .epsilon = 0.01,
+                                                        .begin = row_begin.data(),
+                                                        .length = row_length.data(),
+                                                        .pool = pool.data(),
+                                                        .x_grad = x_grad.data(),
+                                                        .denominator = denominator.data()});
+  const kernels::NeighborRows<double> rows{row_begin.data(), row_length.data(), pool.data(), x_grad.data(), denominator.data()};
   const double lo = *std::min_element(film.begin(), film.end()), hi = *std::max_element(film.begin(), film.end());
   double before = 0;
   for (double f : film) before += f;
   const double diffusivity = 0.15 * kDp * kDp / 0.006, dt = 0.006;
   for (int step = 0; step < 20; ++step) {
-    exec::cpu::ParallelFor(nb, kernels::FilmLaplacian<double>{list.data(), dx.data(), rows, dvol.data(), dfilm.data(), kernel, 0.01,
-                                                              lap.data(), lambda.data()});
+    exec::cpu::ParallelFor(nb, kernels::FilmLaplacian<double>{.list = list.data(),
+                                                              .rows = rows,
+                                                              .volume = dvol.data(),
+                                                              .film = dfilm.data(),
+                                                              .laplacian = lap.data(),
+                                                              .lambda = lambda.data()});
     const double lambda_max = *std::max_element(lambda.data(), lambda.data() + nb);
     ASSERT_LE(dt * diffusivity * lambda_max, 1.0) << "default diffusion must need no sub-stepping at dt_ref (spec §9.3)";
     exec::cpu::ParallelFor(nb,

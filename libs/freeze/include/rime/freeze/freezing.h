@@ -112,6 +112,8 @@ struct FreezingWork : exec::AttributeGroup<FreezingWork<T>> {
         row_pool(d),
         row_flags(d),
         row_list(d),
+        row_x_grad(d),
+        row_denominator(d),
         row_x(d),
         new_rows(d) {}
   DeviceArray<Sym6<T>> fluid_d;  // water: anisotropy D of this step
@@ -126,6 +128,7 @@ struct FreezingWork : exec::AttributeGroup<FreezingWork<T>> {
   // evaluated and kept until the boundary moves or changes near it; row_pool[0, row_pool_used)
   // holds them (rows dropped near new ice leave gaps until the pool is listed anew).
   DeviceArray<std::uint32_t> row_begin, row_length, row_pool, row_flags, row_list;
+  DeviceArray<T> row_x_grad, row_denominator;  // beside row_pool: kernels::NeighborRows
   DeviceArray<Vec3<T>> row_x;
   neighbors::NeighborList new_rows;
   std::size_t row_pool_used = 0;
@@ -164,6 +167,8 @@ struct FreezingWork : exec::AttributeGroup<FreezingWork<T>> {
     f(AttributeInfo{.name = "row_begin"}, s.row_begin);
     f(AttributeInfo{.name = "row_length"}, s.row_length);
     f(AttributeInfo{.name = "row_pool"}, s.row_pool);
+    f(AttributeInfo{.name = "row_x_grad"}, s.row_x_grad);
+    f(AttributeInfo{.name = "row_denominator"}, s.row_denominator);
     f(AttributeInfo{.name = "row_flags"}, s.row_flags);
     f(AttributeInfo{.name = "row_list"}, s.row_list);
     f(AttributeInfo{.name = "row_positions"}, s.row_x);

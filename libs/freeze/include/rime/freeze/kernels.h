@@ -265,11 +265,15 @@ struct GatherListed {
 
 /// Neighbour rows kept per boundary particle while the boundary does not move: the particles
 /// within the support of b, itself included, in the grid's query order, are
-/// pool[begin[b] .. begin[b] + length[b]); length 0 means b has no row yet.
+/// pool[begin[b] .. begin[b] + length[b]); length 0 means b has no row yet. Beside each pair, the
+/// parts of the film Laplacian's weight that depend on the positions only (see FilmLaplacian).
+template <class T>
 struct NeighborRows {
   const std::uint32_t* begin;
   const std::uint32_t* length;
   const std::uint32_t* pool;
+  const T* x_grad;       // −x_bk·∇W_bk
+  const T* denominator;  // r² + εh²
 };
 
 /// flags[k] = 1 where the listed particle list[k] has no row yet.
@@ -281,20 +285,37 @@ struct MarkRowless {
 };
 
 /// Stores the CSR lists of the listed particles (row i for particle list[i]) as their rows, at
-/// `base` in the pool.
+/// `base` in the pool, with each pair's position terms of the film Laplacian: the boundary does
+/// not move while its rows are kept, so a diffusion pass reads them instead of a kernel gradient.
+template <class T>
 struct StoreRows {
   const std::uint32_t* list;
   const std::uint32_t* offsets;
   const std::uint32_t* indices;
   std::uint32_t base;
+  const Vec3<T>* x;  // boundary positions
+  CubicSpline<T> kernel;
+  T epsilon;
   std::uint32_t* begin;
   std::uint32_t* length;
   std::uint32_t* pool;
+  T* x_grad;
+  T* denominator;
   RIME_HD void operator()(Index i) const {
     const std::uint32_t b = list[i], first = offsets[i], end = offsets[i + 1];
     begin[b] = base + first;
     length[b] = end - first;
-    for (std::uint32_t m = first; m < end; ++m) pool[base + m] = indices[m];
+    const Vec3<T> xb = x[b];
+    const T eps_h2 = epsilon * kernel.h * kernel.h;
+    for (std::uint32_t m = first; m < end; ++m) {
+      const std::uint32_t n = indices[m];
+      pool[base + m] = n;
+      const Vec3<T> r = xb - x[n];
+      const T r2 = Dot(r, r);
+      // −x·∇W = −φ r² with φ = B'(q) σ/(h⁴ r) <= 0 (0 for b itself, which the Laplacian skips).
+      x_grad[base + m] = n == b ? T(0) : -kernel.GradientFactor(std::sqrt(r2)) * r2;
+      denominator[base + m] = r2 + eps_h2;
+    }
   }
 };
 
@@ -304,26 +325,19 @@ struct StoreRows {
 template <class T>
 struct FilmLaplacian {
   const std::uint32_t* list;
-  const Vec3<T>* x;  // boundary positions
-  NeighborRows rows;
+  NeighborRows<T> rows;
   const T* volume;
   const T* film;
-  CubicSpline<T> kernel;
-  T epsilon;
   T* laplacian;  // per boundary particle (of the listed ones)
   T* lambda;     // per boundary particle (of the listed ones)
   RIME_HD void operator()(Index k) const {
     const std::uint32_t b = list[k];
-    const Vec3<T> xb = x[b];
-    const T fb = film[b], vb = volume[b], eps_h2 = epsilon * kernel.h * kernel.h;
+    const T fb = film[b], vb = volume[b];
     T l = T(0), lam = T(0);
     for (std::uint32_t m = rows.begin[b], e = m + rows.length[b]; m < e; ++m) {
       const std::uint32_t n = rows.pool[m];
       if (n == b) continue;
-      const Vec3<T> r = xb - x[n];
-      const T r2 = Dot(r, r);
-      // −x·∇W = −φ r² with φ = B'(q) σ/(h⁴ r) <= 0.
-      const T weight = T(2) * T(0.5) * (vb + volume[n]) * (-kernel.GradientFactor(std::sqrt(r2)) * r2) / (r2 + eps_h2);
+      const T weight = T(2) * T(0.5) * (vb + volume[n]) * rows.x_grad[m] / rows.denominator[m];
       l += weight * (film[n] - fb);
       lam += weight;
     }
@@ -487,7 +501,8 @@ struct KeepUnfrozen {
   X(rime::freeze::kernels::GrowRegion<T>)         \
   X(rime::freeze::kernels::JoinRegion<T>)         \
   X(rime::freeze::kernels::MarkAffected<T>)       \
-  X(rime::freeze::kernels::GatherListed<T>)
+  X(rime::freeze::kernels::GatherListed<T>)       \
+  X(rime::freeze::kernels::StoreRows<T>)
 
 #define RIME_FREEZE_KERNELS(X)                    \
   RIME_FREEZE_KERNELS_T(X, float)                 \
@@ -497,5 +512,4 @@ struct KeepUnfrozen {
   X(rime::freeze::kernels::WetChanges)            \
   X(rime::freeze::kernels::AddStale)              \
   X(rime::freeze::kernels::SetListed)             \
-  X(rime::freeze::kernels::MarkRowless)           \
-  X(rime::freeze::kernels::StoreRows)
+  X(rime::freeze::kernels::MarkRowless)
