@@ -71,8 +71,8 @@ void DropChangedRows(const exec::Device& device, const Particles<T>& particles, 
 // it is emptied first and the rows of `list` are listed again (`may_reset` false: that relisting
 // must not empty it once more).
 template <class T>
-void ListRows(const exec::Device& device, const Particles<T>& particles, T support, const std::uint32_t* list, Index count,
-              FreezingWork<T>& work, DeviceArray<std::uint32_t>& slot, bool may_reset = true) {
+void ListRows(const exec::Device& device, const Particles<T>& particles, const CubicSpline<T>& kernel, const std::uint32_t* list,
+              Index count, FreezingWork<T>& work, DeviceArray<std::uint32_t>& slot, bool may_reset = true) {
   work.row_flags.resize(count);
   exec::ParallelFor(device, count, kernels::MarkRowless{.list = list, .length = work.row_length.data(), .flags = work.row_flags.data()});
   const Index rowless = exec::ListFlagged(device, work.row_flags, count, slot, work.row_list);
@@ -81,7 +81,7 @@ void ListRows(const exec::Device& device, const Particles<T>& particles, T suppo
                     exec::Gather<std::uint32_t>{list, work.row_list.data(), work.row_list.data()});  // in place: i reads and writes i
   work.row_x.resize(rowless);
   exec::ParallelFor(device, rowless, exec::Gather<Vec3<T>>{particles.boundary_x, work.row_list.data(), work.row_x.data()});
-  particles.boundary_grid->Query(work.row_x.data(), rowless, support, false, work.new_rows);
+  particles.boundary_grid->Query(work.row_x.data(), rowless, kernel.SupportRadius(), false, work.new_rows);
   const std::size_t pairs = work.new_rows.indices.size();
   const bool reset =
       may_reset && work.row_pool_used > 0 && work.row_pool_used + pairs > 2 * work.row_pool_after_reset + (std::size_t(1) << 16);
@@ -101,7 +101,7 @@ void ListRows(const exec::Device& device, const Particles<T>& particles, T suppo
                                           .indices = indices,
                                           .base = std::uint32_t(work.row_pool_used),
                                           .x = particles.boundary_x,
-                                          .kernel = CubicSpline<T>(support / 2),
+                                          .kernel = kernel,
                                           .epsilon = T(particles.viscosity_epsilon),
                                           .begin = work.row_begin.data(),
                                           .length = work.row_length.data(),
@@ -111,7 +111,7 @@ void ListRows(const exec::Device& device, const Particles<T>& particles, T suppo
   work.row_pool_used += pairs;
   work.new_rows.indices.release();  // scratch that may hold a whole listing (or the pool's old storage)
   if (work.row_pool_after_reset == 0 || reset) {
-    if (reset) ListRows(device, particles, support, list, count, work, slot, false);  // the rows the reset dropped
+    if (reset) ListRows(device, particles, kernel, list, count, work, slot, false);  // the rows the reset dropped
     work.row_pool_after_reset = work.row_pool_used;
   }
 }
@@ -286,11 +286,14 @@ Index FreezeStep(const exec::Device& device, const io::Scene& scene, const Parti
       const auto evaluate = [&] {
         const std::uint32_t* list = nullptr;
         const Index count = EvaluationList(device, particles, support, region, work, slot, list);
-        ListRows(device, particles, support, list, count, work, slot);
+        ListRows(device, particles, kernel, list, count, work, slot);
         exec::ParallelFor(device, count,
                           kernels::FilmLaplacian<T>{.list = list,
-                                                    .rows = {work.row_begin.data(), work.row_length.data(), work.row_pool.data(),
-                                                             work.row_x_grad.data(), work.row_denominator.data()},
+                                                    .rows = {.begin = work.row_begin.data(),
+                                                             .length = work.row_length.data(),
+                                                             .pool = work.row_pool.data(),
+                                                             .x_grad = work.row_x_grad.data(),
+                                                             .denominator = work.row_denominator.data()},
                                                     .volume = particles.boundary_volume,
                                                     .film = film.film.data(),
                                                     .laplacian = work.laplacian.data(),

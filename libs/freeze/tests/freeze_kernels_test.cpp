@@ -70,7 +70,11 @@ TEST(FreezeKernels, FilmDiffusionConservesAndKeepsBounds) {
                                                         .pool = pool.data(),
                                                         .x_grad = x_grad.data(),
                                                         .denominator = denominator.data()});
-  const kernels::NeighborRows<double> rows{row_begin.data(), row_length.data(), pool.data(), x_grad.data(), denominator.data()};
+  const kernels::NeighborRows<double> rows{.begin = row_begin.data(),
+                                           .length = row_length.data(),
+                                           .pool = pool.data(),
+                                           .x_grad = x_grad.data(),
+                                           .denominator = denominator.data()};
   const double lo = *std::min_element(film.begin(), film.end()), hi = *std::max_element(film.begin(), film.end());
   double before = 0;
   for (double f : film) before += f;
