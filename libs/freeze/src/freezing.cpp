@@ -232,7 +232,11 @@ Index FreezeStep(const exec::Device& device, const io::Scene& scene, const Parti
   const Index active = exec::ListFlagged(device, work.boundary_active, nb, slot, work.active_list);
   work.active_x.resize(active);
   exec::ParallelFor(device, active, exec::Gather<Vec3<T>>{particles.boundary_x, work.active_list.data(), work.active_x.data()});
-  particles.fluid_grid->Query(work.active_x.data(), active, support, false, work.bf);
+  // The water moved since its grid was binned; searching cell by cell scans all 27 cells around
+  // each boundary cell, so it also finds water that moved into the support from a cell that the
+  // per-point search would skip as out of range.
+  work.active_grid.Build(work.active_x.data(), active, particles.fluid_grid->cell_size(), particles.fluid_grid->view().origin);
+  particles.fluid_grid->QueryGrid(work.active_grid, support, false, work.bf);
   exec::ParallelFor(device, active,
                     kernels::MarkFluidFromBoundary{
                         .bf_offsets = work.bf.offsets.data(), .bf_index = work.bf.indices.data(), .fluid_flag = work.fluid_flag.data()});

@@ -97,6 +97,7 @@ struct FreezingWork : exec::AttributeGroup<FreezingWork<T>> {
         laplacian(d),
         lambda(d),
         active_x(d),
+        active_grid(d),
         bf(d),
         wet_seen(d),
         newly_wet(d),
@@ -120,7 +121,8 @@ struct FreezingWork : exec::AttributeGroup<FreezingWork<T>> {
   DeviceArray<std::uint32_t> fluid_flag, boundary_active, active_list, decision, trigger, frozen, wet, region, region_list;
   DeviceArray<T> energy_solid, energy_ice, laplacian, lambda;  // laplacian, lambda: per boundary particle
   DeviceArray<Vec3<T>> active_x;
-  neighbors::NeighborList bf;  // boundary–fluid pairs of the boundary particles touching water
+  neighbors::UniformGrid<T> active_grid;  // active_x binned on the water grid's lattice, to query it cell by cell
+  neighbors::NeighborList bf;             // boundary–fluid pairs of the boundary particles touching water
   DeviceArray<std::uint32_t> wet_seen, newly_wet, dried, stale, evaluate, film_touched, structure_touched, change_list;
   DeviceArray<T> region_lambda;
   bool diffusion_cache_valid = false;  // the solver clears it when the boundary moves or is restored

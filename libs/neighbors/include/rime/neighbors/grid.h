@@ -65,7 +65,9 @@ class UniformGrid {
   void Query(const Vec3<T>* queries, Index m, T radius, bool exclude_self, NeighborList& out) const;
   /// The same for the points of another grid as queries (row i = its point i). When both grids
   /// share their cell lattice the search runs per query cell, looking up the 27 neighbor cells
-  /// once for all points of the cell (several times faster on the CPU); identical lists either way.
+  /// once for all points of the cell (several times faster on the CPU); identical lists either way
+  /// while the grid's points are where they were binned (after they moved, it also finds those that
+  /// moved into range from a cell the per-point search skips).
   void QueryGrid(const UniformGrid& queries, T radius, bool exclude_self, NeighborList& out) const;
   /// The same, also filling `values` for every pair. On the CPU the cell-by-cell search tests
   /// 8 candidates at a time and the values are computed from its matches once they are in place;
