@@ -10,7 +10,7 @@ double ExpectedFluidParticles(const io::Scene& scene) {
   const double cell = d * d * d;
   double count = 0;
   for (const io::FluidBlock& b : scene.fluid_blocks) count += b.Volume() / cell;
-  for (const io::Emitter& e : scene.emitters) count += e.EmittedVolume(scene.info.end_time) / cell;
+  for (const io::Emitter& e : scene.emitters) count += e.EmittedParticles(scene.info.end_time, d);
   return count;
 }
 
@@ -25,12 +25,16 @@ double EstimateSimulationBytes(const SimulationCounts& c) {
   // Boundary: positions, velocities, rest-frame positions, volumes, ids; freezing adds film,
   // growth direction, ice anisotropy and energies.
   const double boundary = 11 * t + 29 + (c.freezing ? 16 * t + 24 : 0);
+  // Freezing keeps a film-Laplacian row per wetted boundary particle: ~60 boundary neighbours (the
+  // boundary is sampled at half spacing), an index and two position terms each. Relisting holds old
+  // and new rows at once and arrays grow by half, so up to 4x that; any boundary may get wet.
+  const double film_rows = c.freezing ? 4 * 60 * (4 + 2 * t) : 0;
   // The snapshot handed to the writer thread, and HDF5's chunk buffers for it.
   const double snapshot = 2 * (16 * t + 16);
   // Taken after the check whatever the size: the solver's and HDF5's code pages and the writer
   // thread (6 MiB measured on a scene of 9.4 k water and 67 k boundary particles).
   const double after_check = 10.0 * 1048576;
-  return c.fluid * (fluid + pairs + snapshot) + c.boundary * (boundary + (c.freezing ? snapshot : 0)) + after_check;
+  return c.fluid * (fluid + pairs + snapshot) + c.boundary * (boundary + film_rows + (c.freezing ? snapshot : 0)) + after_check;
 }
 
 }  // namespace rime

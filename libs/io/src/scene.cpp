@@ -47,9 +47,8 @@ SolidObject ParseSolid(TomlReader& t, std::size_t index) {
   return s;
 }
 
-// Particles at spacing d_p in `volume`; refused above kMaxSceneParticles naming `key`.
-void CheckParticleCount(TomlReader& t, const std::string& key, double volume, double spacing, const char* what) {
-  const double count = volume / (spacing * spacing * spacing);
+// Refused above kMaxSceneParticles naming `key`.
+void CheckParticleCount(TomlReader& t, const std::string& key, double count, double spacing, const char* what) {
   if (!(count <= kMaxSceneParticles))
     t.Fail(key, fmt::format("{} would hold about {:.3g} particles at [water] spacing {:g} m, more than {:g} (use a larger "
                             "spacing or a smaller {})",
@@ -61,7 +60,7 @@ FluidBlock ParseBlock(TomlReader& t, double spacing) {
   LoadSettings(t, b);
   if (b.shape == BlockShape::kBox && (b.max.x <= b.min.x || b.max.y <= b.min.y || b.max.z <= b.min.z))
     t.Fail("max", "box max must exceed min on every axis");
-  CheckParticleCount(t, b.shape == BlockShape::kBox ? "max" : "radius", b.Volume(), spacing, "water block");
+  CheckParticleCount(t, b.shape == BlockShape::kBox ? "max" : "radius", b.Volume() / (spacing * spacing * spacing), spacing, "water block");
   t.RejectUnknownKeys();
   return b;
 }
@@ -71,7 +70,7 @@ Emitter ParseEmitter(TomlReader& t, double spacing, double end_time) {
   LoadSettings(t, e);
   if (Norm(e.direction) == 0) t.Fail("direction", "emitter direction must not be zero");
   if (e.stop <= e.start) t.Fail("stop", "emitter stop time must be after its start time");
-  CheckParticleCount(t, e.shape == EmitterShape::kDisc ? "radius" : "width", e.EmittedVolume(end_time), spacing, "emitter");
+  CheckParticleCount(t, e.shape == EmitterShape::kDisc ? "radius" : "width", e.EmittedParticles(end_time, spacing), spacing, "emitter");
   t.RejectUnknownKeys();
   return e;
 }

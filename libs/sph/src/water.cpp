@@ -139,19 +139,14 @@ void Simulation<T>::Emit(double dt, StepStats& stats) {
     const Vec3d helper = std::fabs(dir.z) < 0.9 ? Vec3d(0, 0, 1) : Vec3d(1, 0, 0);
     const Vec3d u = Cross(dir, helper) / Norm(Cross(dir, helper));
     const Vec3d w = Cross(dir, u);
-    const double half_u = em.shape == io::EmitterShape::kDisc ? em.radius : em.width / 2;
-    const double half_w = em.shape == io::EmitterShape::kDisc ? em.radius : em.height / 2;
-    const std::int64_t nu = std::int64_t(std::floor(half_u / dp + 1e-9)), nw = std::int64_t(std::floor(half_w / dp + 1e-9));
     while (emitter_travel_[e] >= dp) {
       emitter_travel_[e] -= dp;
       // The layer emitted `travel` ago has moved that far already.
       const Vec3d base = em.center + dir * emitter_travel_[e];
-      for (std::int64_t a = -nu; a <= nu; ++a)
-        for (std::int64_t b = -nw; b <= nw; ++b) {
-          if (em.shape == io::EmitterShape::kDisc && std::hypot(a * dp, b * dp) > em.radius + 1e-9) continue;
-          new_x.push_back(ToT<T>(base + u * (a * dp) + w * (b * dp)));
-          new_v.push_back(ToT<T>(dir * em.speed));
-        }
+      em.ForEachLayerPoint(dp, [&](double a, double b) {
+        new_x.push_back(ToT<T>(base + u * a + w * b));
+        new_v.push_back(ToT<T>(dir * em.speed));
+      });
     }
   }
   if (new_x.empty()) return;

@@ -64,7 +64,8 @@ struct Setting {
 
 // Production defaults, or a preset's knobs taken from the scene parser (one source of truth).
 io::Scene BaseScene(const std::string& quality, int per_a, bool freezing) {
-  io::Scene preset = quality.empty() ? io::Scene{} : io::ParseScene("[scene]\nquality = \"" + quality + "\"\n", "preset.toml");
+  io::Scene preset;
+  if (!quality.empty()) preset = io::ParseScene("[scene]\nquality = \"" + quality + "\"\n", "preset.toml");
   const double dp = kA / per_a;
   const int ny = std::max(2, int(std::lround(kDepth / dp)));
   io::Scene scene = sph::test::ColumnScene(dp, per_a, ny, 2 * per_a, 0);

@@ -6,6 +6,7 @@
 #pragma once
 
 #include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <filesystem>
 #include <set>
@@ -525,10 +526,31 @@ struct Emitter {
   double speed = 1.0;
   double start = 0, stop = 1e30;
 
-  /// m³ of water emitted until its stop or the scene's end, whichever comes first.
-  double EmittedVolume(double end_time) const {
-    const double area = shape == EmitterShape::kDisc ? 3.14159265358979323846 * radius * radius : width * height;
-    return area * speed * std::max(0.0, std::min(stop, end_time) - start);
+  /// Calls f(a, b) for each particle of one emitted layer: the lattice at spacing `dp` in the
+  /// nozzle plane (a along the width, b along the height), its edges included.
+  template <class F>
+  void ForEachLayerPoint(double dp, F&& f) const {
+    const bool disc = shape == EmitterShape::kDisc;
+    const std::int64_t nu = std::int64_t(std::floor((disc ? radius : width / 2) / dp + 1e-9));
+    const std::int64_t nw = std::int64_t(std::floor((disc ? radius : height / 2) / dp + 1e-9));
+    for (std::int64_t a = -nu; a <= nu; ++a)
+      for (std::int64_t b = -nw; b <= nw; ++b)
+        if (!disc || std::hypot(double(a) * dp, double(b) * dp) <= radius + 1e-9) f(double(a) * dp, double(b) * dp);
+  }
+
+  /// Particles emitted until its stop or the scene's end, whichever comes first: a layer each time
+  /// the jet has advanced by `dp`. Counted per lattice row, in closed form, so a hostile size
+  /// costs no time (a disc wider than 10^6 rows is counted by its area).
+  double EmittedParticles(double end_time, double dp) const {
+    const double layers = std::floor(speed * std::max(0.0, std::min(stop, end_time) - start) / dp + 1e-9);
+    if (shape == EmitterShape::kRectangle)
+      return layers * (2 * std::floor(width / 2 / dp + 1e-9) + 1) * (2 * std::floor(height / 2 / dp + 1e-9) + 1);
+    const double rows = std::floor(radius / dp + 1e-9);
+    if (rows > 1e6) return layers * 3.14159265358979323846 * radius * radius / (dp * dp);
+    double layer = 0;
+    for (double a = -rows; a <= rows; ++a)
+      layer += 2 * std::floor(std::sqrt(std::max(0.0, radius * radius - a * dp * a * dp)) / dp + 1e-9) + 1;
+    return layers * layer;
   }
 
   template <class Self, class F>
