@@ -48,7 +48,7 @@ TEST(Examples, DefaultSceneIsProceduralAndFreezes) {
   // Small enough to bake in about two minutes on 2 cores: a few thousand particles, a few seconds.
   const double dp = scene.fluid.spacing;
   double particles = 0;
-  for (const auto& b : scene.fluid_blocks) particles += b.Volume() / (dp * dp * dp);
+  for (const auto& b : scene.fluid_blocks) particles += b.Particles(dp);
   for (const auto& e : scene.emitters) particles += e.EmittedParticles(scene.info.end_time, dp);
   EXPECT_GT(particles, 500);
   EXPECT_LT(particles, 20000);

@@ -1,15 +1,13 @@
 #include "memory_estimate.h"
 
 #include <algorithm>
-#include <numbers>
 
 namespace rime {
 
 double ExpectedFluidParticles(const io::Scene& scene) {
   const double d = scene.fluid.spacing;
-  const double cell = d * d * d;
   double count = 0;
-  for (const io::FluidBlock& b : scene.fluid_blocks) count += b.Volume() / cell;
+  for (const io::FluidBlock& b : scene.fluid_blocks) count += b.Particles(d);
   for (const io::Emitter& e : scene.emitters) count += e.EmittedParticles(scene.info.end_time, d);
   return count;
 }

@@ -60,7 +60,7 @@ FluidBlock ParseBlock(TomlReader& t, double spacing) {
   LoadSettings(t, b);
   if (b.shape == BlockShape::kBox && (b.max.x <= b.min.x || b.max.y <= b.min.y || b.max.z <= b.min.z))
     t.Fail("max", "box max must exceed min on every axis");
-  CheckParticleCount(t, b.shape == BlockShape::kBox ? "max" : "radius", b.Volume() / (spacing * spacing * spacing), spacing, "water block");
+  CheckParticleCount(t, b.shape == BlockShape::kBox ? "max" : "radius", b.Particles(spacing), spacing, "water block");
   t.RejectUnknownKeys();
   return b;
 }

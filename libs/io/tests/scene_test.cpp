@@ -136,5 +136,32 @@ TEST(Scene, Im2013MethodPresetSetsTheBaselineAndExplicitValuesWin) {
   EXPECT_THROW(ParseScene("[scene]\nmethod = \"im2014\"\n", "m.toml"), rime::Error);
 }
 
+// The closed-form counts that size limits and memory estimates use are the lattices the solver
+// seeds, point for point.
+TEST(Scene, ParticleCountsMatchTheSeededLattices) {
+  const double dp = 0.01;
+  for (const Vec3d& extent : {Vec3d{0.3, 0.3, 0.24}, Vec3d{0.255, 0.1, 0.049}, Vec3d{0.01, 0.02, 0.005}}) {
+    FluidBlock box{.shape = BlockShape::kBox, .min = {0.1, -0.2, 0.3}, .max = Vec3d{0.1, -0.2, 0.3} + extent};
+    double points = 0;
+    box.ForEachLatticePoint(dp, [&](const Vec3d&) { ++points; });
+    EXPECT_EQ(box.Particles(dp), points) << extent.x << " x " << extent.y << " x " << extent.z;
+  }
+  for (double radius : {0.005, 0.01, 0.0499, 0.05, 0.137}) {
+    FluidBlock sphere{.shape = BlockShape::kSphere, .center = {0.3, 0.1, -0.2}, .radius = radius};
+    double points = 0;
+    sphere.ForEachLatticePoint(dp, [&](const Vec3d&) { ++points; });
+    EXPECT_EQ(sphere.Particles(dp), points) << "sphere of radius " << radius;
+    Emitter disc{.shape = EmitterShape::kDisc, .radius = radius, .speed = dp, .stop = 3};  // one layer per second
+    double layer = 0;
+    disc.ForEachLayerPoint(dp, [&](double, double) { ++layer; });
+    EXPECT_EQ(disc.EmittedParticles(2.5, dp), 2 * layer) << "disc of radius " << radius;
+  }
+  Emitter nozzle{.shape = EmitterShape::kRectangle, .width = 0.12, .height = 0.02, .speed = 0.4, .stop = 1.5};
+  double layer = 0;
+  nozzle.ForEachLayerPoint(dp, [&](double, double) { ++layer; });
+  EXPECT_EQ(layer, 13 * 3);
+  EXPECT_EQ(nozzle.EmittedParticles(3.0, dp), 60 * layer);
+}
+
 }  // namespace
 }  // namespace rime::io

@@ -21,35 +21,17 @@ template <class T>
 void Simulation<T>::SeedWater(const Enclosure& enclosure) {
   State& s = *state_;
   const double dp = scene_.fluid.spacing;
-  // Fluid blocks on a lattice of spacing d_p, anchored at the block's min corner (box) or centre
-  // (sphere). Particles closer than 1.05 d_p to a boundary particle are dropped: fluid must start
+  // Fluid blocks on their lattices of spacing d_p. Particles closer than 1.05 d_p to a boundary particle are dropped: fluid must start
   // about 1.1 d_p from walls (spec §3), and nothing may start inside a solid.
   std::vector<Vec3<T>> x;
   std::vector<Vec3<T>> v;
   for (const io::FluidBlock& block : scene_.fluid_blocks) {
-    if (block.shape == io::BlockShape::kBox) {
-      const Vec3d ext = block.max - block.min;
-      const std::int64_t nx = std::int64_t(std::floor(ext.x / dp + 1e-6)) + 1, ny = std::int64_t(std::floor(ext.y / dp + 1e-6)) + 1,
-                         nz = std::int64_t(std::floor(ext.z / dp + 1e-6)) + 1;
-      if (nx * ny * nz > 200'000'000)
-        throw InputError("water block would create more than 200 million particles", SceneField(scene_, "water_block"));
-      for (std::int64_t k = 0; k < nz; ++k)
-        for (std::int64_t j = 0; j < ny; ++j)
-          for (std::int64_t i = 0; i < nx; ++i) {
-            x.push_back(ToT<T>(block.min + Vec3d(i * dp, j * dp, k * dp)));
-            v.push_back(ToT<T>(block.velocity));
-          }
-    } else {
-      const std::int64_t r = std::int64_t(std::floor(block.radius / dp + 1e-6));
-      for (std::int64_t k = -r; k <= r; ++k)
-        for (std::int64_t j = -r; j <= r; ++j)
-          for (std::int64_t i = -r; i <= r; ++i) {
-            const Vec3d offset(i * dp, j * dp, k * dp);
-            if (Norm(offset) > block.radius + 1e-9) continue;
-            x.push_back(ToT<T>(block.center + offset));
-            v.push_back(ToT<T>(block.velocity));
-          }
-    }
+    if (block.Particles(dp) > 200'000'000)
+      throw InputError("water block would create more than 200 million particles", SceneField(scene_, "water_block"));
+    block.ForEachLatticePoint(dp, [&](const Vec3d& p) {
+      x.push_back(ToT<T>(p));
+      v.push_back(ToT<T>(block.velocity));
+    });
   }
   std::size_t dropped = 0, enclosed = 0;
   if (enclosure.enclosed_cells() > 0) {

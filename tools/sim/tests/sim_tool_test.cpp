@@ -177,7 +177,7 @@ namespace {
 TEST_F(SimTool, RefusesAboveTheMemoryBudgetBeforeWritingAFrame) {
   fs::path scene = WriteScene("");
   {
-    // The same scene at a 1 cm spacing: about 9.4 k water and 67 k boundary particles.
+    // The same scene at a 1 cm spacing: about 10.8 k water and 53 k boundary particles.
     std::string text = rime::test::ReadFile(scene);
     text.replace(text.find("spacing = 0.04"), 14, "spacing = 0.01");
     rime::test::WriteFile(scene, text);
@@ -186,8 +186,8 @@ TEST_F(SimTool, RefusesAboveTheMemoryBudgetBeforeWritingAFrame) {
   const Result r = Exec(Sim(scene, "sim", "--memory-budget 1M"));
   EXPECT_EQ(r.code, 10) << r.output;
   EXPECT_NE(r.output.find("rime-sim: error: needs about "), std::string::npos) << r.output;
-  // 0.25 x 0.25 x 0.15 m of water at 1 cm: 9,375 particles.
-  EXPECT_NE(r.output.find(" for 9.3"), std::string::npos) << r.output;
+  // 0.25 x 0.25 x 0.15 m of water on a 1 cm lattice, its far faces included: 26 x 26 x 16 points.
+  EXPECT_NE(r.output.find(" for 10.8 k water"), std::string::npos) << r.output;
   EXPECT_NE(r.output.find(" k water and "), std::string::npos) << r.output;
   EXPECT_NE(r.output.find(" boundary particles (scene " + scene.string() + ", spacing 10 mm), budget 1 MiB (--memory-budget)"),
             std::string::npos)
@@ -196,7 +196,7 @@ TEST_F(SimTool, RefusesAboveTheMemoryBudgetBeforeWritingAFrame) {
 }
 
 // The estimate must bound the measured peak where the process's own memory weighs most: a small
-// dense scene (about 9.4 k water and 67 k boundary particles at 1 cm), freezing on, two threads.
+// dense scene (about 10.8 k water and 53 k boundary particles at 1 cm), freezing on, two threads.
 // The estimate from the refusal at a 1-byte budget, then the peak of the whole run.
 void SimTool::ExpectEstimateBoundsThePeak(const fs::path& scene) {
   MakeBoundary(scene);

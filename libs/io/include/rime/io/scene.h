@@ -9,6 +9,7 @@
 #include <cmath>
 #include <cstdint>
 #include <filesystem>
+#include <numbers>
 #include <set>
 #include <span>
 #include <string>
@@ -482,6 +483,12 @@ inline std::span<const std::string_view> Names(BlockShape) {
   return names;
 }
 
+/// Lattice points of spacing dp along an extent, both ends included when it is a multiple of dp
+/// (as a double, so that a hostile extent cannot overflow).
+inline double LatticeCount(double extent, double dp) { return std::floor(extent / dp + 1e-6) + 1; }
+/// Lattice rows on one side of a centre row within `half`.
+inline double HalfRows(double half, double dp) { return std::floor(half / dp + 1e-9); }
+
 struct FluidBlock {
   BlockShape shape = BlockShape::kBox;
   Vec3d min{0, 0, 0}, max{0.1, 0.1, 0.1};
@@ -489,10 +496,45 @@ struct FluidBlock {
   double radius = 0.1;
   Vec3d velocity{0, 0, 0};
 
-  /// m³ of water the block holds (the lattice fills about this much).
-  double Volume() const {
-    const Vec3d e = max - min;
-    return shape == BlockShape::kBox ? e.x * e.y * e.z : 4.0 / 3.0 * 3.14159265358979323846 * radius * radius * radius;
+  /// Calls f(p) for each lattice point of spacing `dp` that seeds the block: anchored at the box's
+  /// `min` corner (its far faces included when the extent is a multiple of dp), or at the sphere's
+  /// centre.
+  template <class F>
+  void ForEachLatticePoint(double dp, F&& f) const {
+    if (shape == BlockShape::kBox) {
+      const Vec3d e = max - min;
+      const std::int64_t nx = std::int64_t(LatticeCount(e.x, dp)), ny = std::int64_t(LatticeCount(e.y, dp)),
+                         nz = std::int64_t(LatticeCount(e.z, dp));
+      for (std::int64_t k = 0; k < nz; ++k)
+        for (std::int64_t j = 0; j < ny; ++j)
+          for (std::int64_t i = 0; i < nx; ++i) f(min + Vec3d(double(i) * dp, double(j) * dp, double(k) * dp));
+      return;
+    }
+    const std::int64_t r = std::int64_t(std::floor(radius / dp + 1e-6));
+    for (std::int64_t k = -r; k <= r; ++k)
+      for (std::int64_t j = -r; j <= r; ++j)
+        for (std::int64_t i = -r; i <= r; ++i) {
+          const Vec3d offset(double(i) * dp, double(j) * dp, double(k) * dp);
+          if (Norm(offset) <= radius + 1e-9) f(center + offset);
+        }
+  }
+
+  /// Points ForEachLatticePoint visits, in closed form (per row for a sphere) so that a hostile
+  /// size costs no time; a sphere wider than 10^3 rows is counted by its volume.
+  double Particles(double dp) const {
+    if (shape == BlockShape::kBox) {
+      const Vec3d e = max - min;
+      return LatticeCount(e.x, dp) * LatticeCount(e.y, dp) * LatticeCount(e.z, dp);
+    }
+    const double rows = std::floor(radius / dp + 1e-6);
+    if (rows > 1e3) return 4.0 / 3.0 * std::numbers::pi * radius * radius * radius / (dp * dp * dp);
+    double count = 0;
+    for (double k = -rows; k <= rows; ++k)
+      for (double j = -rows; j <= rows; ++j) {
+        const double left = (radius + 1e-9) * (radius + 1e-9) - (k * k + j * j) * dp * dp;
+        if (left >= 0) count += 2 * std::floor(std::sqrt(left) / dp + 1e-9) + 1;
+      }
+    return count;
   }
 
   template <class Self, class F>
@@ -531,8 +573,8 @@ struct Emitter {
   template <class F>
   void ForEachLayerPoint(double dp, F&& f) const {
     const bool disc = shape == EmitterShape::kDisc;
-    const std::int64_t nu = std::int64_t(std::floor((disc ? radius : width / 2) / dp + 1e-9));
-    const std::int64_t nw = std::int64_t(std::floor((disc ? radius : height / 2) / dp + 1e-9));
+    const std::int64_t nu = std::int64_t(HalfRows(disc ? radius : width / 2, dp));
+    const std::int64_t nw = std::int64_t(HalfRows(disc ? radius : height / 2, dp));
     for (std::int64_t a = -nu; a <= nu; ++a)
       for (std::int64_t b = -nw; b <= nw; ++b)
         if (!disc || std::hypot(double(a) * dp, double(b) * dp) <= radius + 1e-9) f(double(a) * dp, double(b) * dp);
@@ -543,13 +585,11 @@ struct Emitter {
   /// costs no time (a disc wider than 10^6 rows is counted by its area).
   double EmittedParticles(double end_time, double dp) const {
     const double layers = std::floor(speed * std::max(0.0, std::min(stop, end_time) - start) / dp + 1e-9);
-    if (shape == EmitterShape::kRectangle)
-      return layers * (2 * std::floor(width / 2 / dp + 1e-9) + 1) * (2 * std::floor(height / 2 / dp + 1e-9) + 1);
-    const double rows = std::floor(radius / dp + 1e-9);
-    if (rows > 1e6) return layers * 3.14159265358979323846 * radius * radius / (dp * dp);
+    if (shape == EmitterShape::kRectangle) return layers * (2 * HalfRows(width / 2, dp) + 1) * (2 * HalfRows(height / 2, dp) + 1);
+    const double rows = HalfRows(radius, dp);
+    if (rows > 1e6) return layers * std::numbers::pi * radius * radius / (dp * dp);
     double layer = 0;
-    for (double a = -rows; a <= rows; ++a)
-      layer += 2 * std::floor(std::sqrt(std::max(0.0, radius * radius - a * dp * a * dp)) / dp + 1e-9) + 1;
+    for (double a = -rows; a <= rows; ++a) layer += 2 * HalfRows(std::sqrt(std::max(0.0, radius * radius - a * dp * a * dp)), dp) + 1;
     return layers * layer;
   }
 
