@@ -24,9 +24,9 @@
 // intervals 1→3 and 2→4 of s − s_eq (same direction: the prolate and oblate half cycles differ),
 // the decay rate γ comes from the same-sign extremes 1→3 and 2→4, and Rayleigh's undamped
 // ω0² = ω_d² + γ². A run counts if it has 4 crossings and its 4th half cycle stands ≥ 2 × the
-// noise above s_eq. Each radius is run with ε = 0.2, 0.25, 0.3, 0.35 and 0.4 (a single run's period
-// scatters by ~±10 % with the particle noise), a majority of which must count; the median period
-// per radius gives σ_eff =
+// noise above s_eq. Each radius is run with nine stretches, ε = 0.2 to 0.4 in steps of 0.025 (a
+// single run's period scatters by ~±10 % with the particle noise), at least three of which must
+// count (reasons at kMinRuns); the median period per radius gives σ_eff =
 // ω0² ρ R³ / 8 (constant if the model acts as a surface tension) and the fitted exponent of T(R),
 // which must be within 0.25 of 1.5 (fast: R = 4, 6, 8 h) or 0.2 (full: R = 4–12 h); the reasons for
 // these tolerances are at the check.
@@ -65,6 +65,10 @@ constexpr double kRho = 1000;
 // The 4th half cycle's extreme must stand this far above the drop's rms fluctuation for its
 // crossing to be a crossing of the oscillation rather than of the noise.
 constexpr double kMinSnr = 2;
+// Runs that must count at every radius for its median period. Not a majority: the smallest drop
+// (257 particles) keeps so much thermal motion that its second period stands under twice the
+// noise in a third to a half of the runs, and which ones depends on the build's rounding.
+constexpr int kMinRuns = 3;
 
 struct Config {
   std::string model = "akinci2013";
@@ -264,7 +268,8 @@ using test::Median;
 int Run(const Options& o, const Config& cfg) {
   std::vector<double> radii = o.full ? std::vector<double>{4, 5, 6, 8, 10, 12} : std::vector<double>{4, 6, 8};
   if (!cfg.radii.empty()) radii = cfg.radii;
-  const std::vector<double> epsilons = cfg.epsilons.empty() ? std::vector<double>{0.2, 0.25, 0.3, 0.35, 0.4} : cfg.epsilons;
+  const std::vector<double> epsilons =
+      cfg.epsilons.empty() ? std::vector<double>{0.2, 0.225, 0.25, 0.275, 0.3, 0.325, 0.35, 0.375, 0.4} : cfg.epsilons;
   const double beta0 = cfg.Beta0();
   const std::string model = cfg.Akinci() ? fmt::format("gamma = {:.3g}", cfg.gamma) : fmt::format("kappa = {:.3g} N", cfg.kappa);
   std::string viscosity = beta0 > 0 ? fmt::format("beta0 = {:.3g} (nu_eff = {:.2g} m^2/s)", beta0, beta0 * kDp) : "none";
@@ -341,7 +346,7 @@ int Run(const Options& o, const Config& cfg) {
   std::printf("\n  R/h   runs  median T0 (s)  spread (s)  T0/R^1.5 (s/m^1.5)  damping (1/s)  sigma_eff (N/m)\n");
   std::vector<double> log_r, log_p, sigmas;
   bool measured = true;
-  const int min_runs = int(epsilons.size() + 1) / 2;  // a majority of the runs
+  const int min_runs = std::min(kMinRuns, int(epsilons.size()));
   for (const PerRadius& pr : summary) {
     std::printf("  %4.2f  %4d  %13.3f  %5.3f-%5.3f  %18.3f  %13.3f  %15.4f\n", pr.radius / kDp, pr.runs, pr.period, pr.runs ? pr.low : 0,
                 pr.high, pr.period / std::pow(pr.radius, 1.5), pr.damping, pr.sigma);
@@ -365,7 +370,7 @@ int Run(const Options& o, const Config& cfg) {
   // Tolerance (README): the interface is about 2h thick whatever R is, so the drop's effective
   // radius and curvature carry an O(h/R) error; σ_eff ∝ 1 + c h/R with c ~ 2 bends the exponent by
   // (c/2)(h/R)/(1 + c h/R) ≈ 0.1–0.2 at R = 4–8 h. On top of that each run's period scatters by
-  // about ±10 % (the drop's particle noise), ±5 % for the median of five runs: ±0.1 in an exponent
+  // about ±10 % (the drop's particle noise), ±5 % for the median of the runs that count: ±0.1 in an exponent
   // fitted over a factor 2 in R (fast), ±0.05 over a factor 3 (full). Hence 0.25 (fast) and 0.2
   // (full).
   const double tol = o.full ? 0.20 : 0.25;
