@@ -46,10 +46,7 @@ TEST(Examples, DefaultSceneIsProceduralAndFreezes) {
   for (const auto& solid : scene.solids) EXPECT_NE(solid.shape, io::SolidShape::kMesh) << solid.name;
   for (const char* module : {"gravity", "viscosity", "surface_tension", "freezing"}) EXPECT_TRUE(scene.Enabled(module)) << module;
   // Small enough to bake in about two minutes on 2 cores: a few thousand particles, a few seconds.
-  const double dp = scene.fluid.spacing;
-  double particles = 0;
-  for (const auto& b : scene.fluid_blocks) particles += b.Particles(dp);
-  for (const auto& e : scene.emitters) particles += e.EmittedParticles(scene.info.end_time, dp);
+  const double particles = scene.WaterParticles();
   EXPECT_GT(particles, 500);
   EXPECT_LT(particles, 20000);
   EXPECT_LE(scene.info.end_time, 3.0);

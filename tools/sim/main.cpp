@@ -106,7 +106,7 @@ int Run(const rime::io::Scene& scene, const Options& opt, const rime::tool::Comm
   }
   // Refused before the simulation allocates its arrays and before any frame is written.
   SimulationCounts counts;
-  counts.fluid = ExpectedFluidParticles(scene);
+  counts.fluid = scene.WaterParticles();
   counts.boundary = boundary_particles;
   counts.freezing = scene.Enabled("freezing");
   counts.scalar_bytes = sizeof(T);

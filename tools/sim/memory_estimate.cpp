@@ -1,16 +1,6 @@
 #include "memory_estimate.h"
 
-#include <algorithm>
-
 namespace rime {
-
-double ExpectedFluidParticles(const io::Scene& scene) {
-  const double d = scene.fluid.spacing;
-  double count = 0;
-  for (const io::FluidBlock& b : scene.fluid_blocks) count += b.Particles(d);
-  for (const io::Emitter& e : scene.emitters) count += e.EmittedParticles(scene.info.end_time, d);
-  return count;
-}
 
 double EstimateSimulationBytes(const SimulationCounts& c) {
   const double t = c.scalar_bytes;

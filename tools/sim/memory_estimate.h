@@ -13,10 +13,6 @@ struct SimulationCounts {
   int scalar_bytes = 4;   // [water] precision: 4 (float) or 8 (double)
 };
 
-/// Water particles the scene can hold: its blocks at [water] spacing plus what each emitter emits
-/// until it stops or the scene ends (particles leaving the domain are not subtracted).
-double ExpectedFluidParticles(const io::Scene& scene);
-
 /// Peak resident bytes: per-particle arrays, neighbour lists (and the search's staged matches) at
 /// about 40 fluid and 20 boundary neighbours per water particle, and the frame snapshot being written. Calibrated against
 /// measured peaks in docs/reliability.md.

@@ -21,8 +21,9 @@ template <class T>
 void Simulation<T>::SeedWater(const Enclosure& enclosure) {
   State& s = *state_;
   const double dp = scene_.fluid.spacing;
-  // Fluid blocks on their lattices of spacing d_p. Particles closer than 1.05 d_p to a boundary particle are dropped: fluid must start
-  // about 1.1 d_p from walls (spec §3), and nothing may start inside a solid.
+  // Fluid blocks on their lattices of spacing d_p. Particles closer than 1.05 d_p to a boundary
+  // particle are dropped: fluid must start about 1.1 d_p from walls (spec §3), and nothing may
+  // start inside a solid.
   std::vector<Vec3<T>> x;
   std::vector<Vec3<T>> v;
   for (const io::FluidBlock& block : scene_.fluid_blocks) {

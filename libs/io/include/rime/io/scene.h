@@ -488,6 +488,12 @@ inline std::span<const std::string_view> Names(BlockShape) {
 inline double LatticeCount(double extent, double dp) { return std::floor(extent / dp + 1e-6) + 1; }
 /// Lattice rows on one side of a centre row within `half`.
 inline double HalfRows(double half, double dp) { return std::floor(half / dp + 1e-9); }
+/// Lattice points of a row at squared distance `offset_sq` from the centre of a disc or sphere of
+/// `radius` that lie within it (the seeding's 1e-9 m tolerance included).
+inline double ChordPoints(double radius, double offset_sq, double dp) {
+  const double half_sq = (radius + 1e-9) * (radius + 1e-9) - offset_sq;
+  return half_sq < 0 ? 0 : 2 * HalfRows(std::sqrt(half_sq), dp) + 1;
+}
 
 struct FluidBlock {
   BlockShape shape = BlockShape::kBox;
@@ -530,10 +536,7 @@ struct FluidBlock {
     if (rows > 1e3) return 4.0 / 3.0 * std::numbers::pi * radius * radius * radius / (dp * dp * dp);
     double count = 0;
     for (double k = -rows; k <= rows; ++k)
-      for (double j = -rows; j <= rows; ++j) {
-        const double left = (radius + 1e-9) * (radius + 1e-9) - (k * k + j * j) * dp * dp;
-        if (left >= 0) count += 2 * std::floor(std::sqrt(left) / dp + 1e-9) + 1;
-      }
+      for (double j = -rows; j <= rows; ++j) count += ChordPoints(radius, (k * k + j * j) * dp * dp, dp);
     return count;
   }
 
@@ -589,7 +592,7 @@ struct Emitter {
     const double rows = HalfRows(radius, dp);
     if (rows > 1e6) return layers * std::numbers::pi * radius * radius / (dp * dp);
     double layer = 0;
-    for (double a = -rows; a <= rows; ++a) layer += 2 * HalfRows(std::sqrt(std::max(0.0, radius * radius - a * dp * a * dp)), dp) + 1;
+    for (double a = -rows; a <= rows; ++a) layer += ChordPoints(radius, a * dp * a * dp, dp);
     return layers * layer;
   }
 
@@ -638,6 +641,14 @@ struct Scene {
   CleanupSettings cleanup;
 
   bool Enabled(const std::string& module) const { return modules.count(module) != 0; }
+  /// Water particles the scene can hold: its blocks' lattices plus what each emitter emits until
+  /// it stops or the scene ends (particles leaving the domain are not subtracted).
+  double WaterParticles() const {
+    double count = 0;
+    for (const FluidBlock& b : fluid_blocks) count += b.Particles(fluid.spacing);
+    for (const Emitter& e : emitters) count += e.EmittedParticles(info.end_time, fluid.spacing);
+    return count;
+  }
   /// Resolves a path written in the scene relative to the scene file's folder.
   std::filesystem::path Resolve(const std::filesystem::path& p) const;
   std::int64_t FrameCount() const;  // output frames after frame 0
