@@ -9,6 +9,7 @@
 #include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
 #include <CGAL/Polygon_mesh_processing/angle_and_area_smoothing.h>
 #include <CGAL/Polygon_mesh_processing/border.h>
+#include <CGAL/Polygon_mesh_processing/compute_normal.h>
 #include <CGAL/Polygon_mesh_processing/connected_components.h>
 #include <CGAL/Polygon_mesh_processing/manifoldness.h>
 #include <CGAL/Polygon_mesh_processing/orient_polygon_soup.h>
@@ -112,6 +113,29 @@ bool HasBorder(const Mesh& mesh) {
   for (HalfedgeIndex h : mesh.halfedges())
     if (mesh.is_border(h)) return true;
   return false;
+}
+
+/// Faces, area, signed volume and closedness of each connected component (fcc: face -> component).
+struct ComponentMeasures {
+  std::vector<std::size_t> faces;
+  std::vector<double> area, volume;
+  std::vector<char> closed;
+};
+template <typename ComponentMap>
+ComponentMeasures MeasureComponents(const Mesh& mesh, const ComponentMap& fcc, std::size_t count) {
+  ComponentMeasures m{std::vector<std::size_t>(count, 0), std::vector<double>(count, 0), std::vector<double>(count, 0),
+                      std::vector<char>(count, 1)};
+  for (FaceIndex f : mesh.faces()) {
+    const std::size_t c = fcc[f];
+    ++m.faces[c];
+    const HalfedgeIndex h = mesh.halfedge(f);
+    const Point &a = mesh.point(mesh.source(h)), &b = mesh.point(mesh.target(h)), &p = mesh.point(mesh.target(mesh.next(h)));
+    m.area[c] += std::sqrt(CGAL::to_double(CGAL::squared_area(a, b, p)));
+    m.volume[c] += CGAL::to_double(CGAL::scalar_product(a - CGAL::ORIGIN, CGAL::cross_product(b - CGAL::ORIGIN, p - CGAL::ORIGIN))) / 6;
+  }
+  for (HalfedgeIndex h : mesh.halfedges())
+    if (mesh.is_border(h)) m.closed[fcc[mesh.face(mesh.opposite(h))]] = 0;
+  return m;
 }
 
 double SignedVolume(const Mesh& mesh) {
@@ -237,19 +261,7 @@ class Chain {
     Run("components", [&] {
       auto fcc = mesh_.add_property_map<FaceIndex, std::size_t>("f:rime_component", 0).first;
       const std::size_t count = PMP::connected_components(mesh_, fcc);
-      std::vector<std::size_t> faces(count, 0);
-      std::vector<double> area(count, 0), volume(count, 0);
-      std::vector<char> closed(count, 1);
-      for (FaceIndex f : mesh_.faces()) {
-        const std::size_t c = fcc[f];
-        ++faces[c];
-        const HalfedgeIndex h = mesh_.halfedge(f);
-        const Point &a = mesh_.point(mesh_.source(h)), &b = mesh_.point(mesh_.target(h)), &p = mesh_.point(mesh_.target(mesh_.next(h)));
-        area[c] += std::sqrt(CGAL::to_double(CGAL::squared_area(a, b, p)));
-        volume[c] += CGAL::to_double(CGAL::scalar_product(a - CGAL::ORIGIN, CGAL::cross_product(b - CGAL::ORIGIN, p - CGAL::ORIGIN))) / 6;
-      }
-      for (HalfedgeIndex h : mesh_.halfedges())
-        if (mesh_.is_border(h)) closed[fcc[mesh_.face(mesh_.opposite(h))]] = 0;
+      const auto [faces, area, volume, closed] = MeasureComponents(mesh_, fcc, count);
       const std::size_t largest = count == 0 ? 0 : std::size_t(std::max_element(faces.begin(), faces.end()) - faces.begin());
       std::vector<std::size_t> remove;
       std::size_t removed_faces = 0;
@@ -336,18 +348,59 @@ class Chain {
     }
     if (settings_.shape_smooth_iterations > 0 && !mesh_.is_empty()) {
       Run("shape_smooth", [&] {
-        const double before = HasBorder(mesh_) ? 0 : SignedVolume(mesh_);
-        PMP::smooth_shape(mesh_, settings_.shape_smooth_time, params::number_of_iterations(settings_.shape_smooth_iterations));
-        // Mean-curvature flow shrinks; rescale about the centroid to restore a closed mesh's volume.
-        if (before != 0) {
-          const double after = SignedVolume(mesh_);
-          if (after > 0 && before > 0) {
-            const double scale = std::cbrt(before / after);
-            const auto box = CGAL::bbox_3(mesh_.points().begin(), mesh_.points().end());
-            const Point c((box.xmin() + box.xmax()) / 2, (box.ymin() + box.ymax()) / 2, (box.zmin() + box.zmax()) / 2);
-            for (VertexIndex v : mesh_.vertices()) mesh_.point(v) = c + (mesh_.point(v) - c) * scale;
+        auto fcc = mesh_.add_property_map<FaceIndex, std::size_t>("f:rime_component", 0).first;
+        auto fixed = mesh_.add_property_map<VertexIndex, bool>("v:rime_fixed", false).first;
+        const std::size_t count = PMP::connected_components(mesh_, fcc);
+        const std::vector<double> target = MeasureComponents(mesh_, fcc, count).volume;
+        // CGAL rescales the whole mesh about its centroid after each step unless two or more vertices
+        // are constrained; a constrained tetrahedron (piece `count`, removed after) turns that off.
+        const HalfedgeIndex anchor = CGAL::make_tetrahedron(Point(0, 0, 0), Point(1e-3, 0, 0), Point(0, 1e-3, 0), Point(0, 0, 1e-3), mesh_);
+        for (VertexIndex v : CGAL::vertices_around_face(anchor, mesh_)) fixed[v] = true;
+        fixed[mesh_.target(mesh_.next(mesh_.opposite(anchor)))] = true;
+        for (FaceIndex f : CGAL::faces_around_face(anchor, mesh_)) fcc[f] = count;
+        fcc[mesh_.face(anchor)] = count;
+        std::vector<std::size_t> vertex_component(mesh_.num_vertices(), count);
+        for (VertexIndex v : mesh_.vertices())
+          for (FaceIndex f : CGAL::faces_around_target(mesh_.halfedge(v), mesh_))
+            if (f != Mesh::null_face()) vertex_component[v] = fcc[f];
+        std::vector<Point> start(mesh_.num_vertices());
+        std::size_t kept = 0;
+        // One step at a time, each piece's volume restored after it by offsetting the piece along
+        // its normals (loss / area). A piece that one step shrinks by more than a tenth is too
+        // small for the time step (MCF collapses it): it goes back to where the step found it and
+        // stays there.
+        for (int it = 0; it < settings_.shape_smooth_iterations; ++it) {
+          for (VertexIndex v : mesh_.vertices()) start[v] = mesh_.point(v);
+          PMP::smooth_shape(mesh_, settings_.shape_smooth_time, params::number_of_iterations(1).vertex_is_constrained_map(fixed));
+          const ComponentMeasures now = MeasureComponents(mesh_, fcc, count + 1);
+          std::vector<double> offset(count + 1, 0);
+          std::vector<char> collapsed(count + 1, 0);
+          for (std::size_t c = 0; c < count; ++c) {
+            if (!now.closed[c] || !(target[c] > 0)) continue;
+            if (!(now.volume[c] > 0.9 * target[c]) || !(now.area[c] > 0)) collapsed[c] = 1;
+            else offset[c] = (target[c] - now.volume[c]) / now.area[c];
           }
+          std::vector<Kernel::Vector_3> move(mesh_.num_vertices(), CGAL::NULL_VECTOR);
+          for (VertexIndex v : mesh_.vertices())
+            if (offset[vertex_component[v]] != 0) move[v] = offset[vertex_component[v]] * PMP::compute_vertex_normal(v, mesh_);
+          for (VertexIndex v : mesh_.vertices()) {
+            if (fixed[v]) continue;
+            if (collapsed[vertex_component[v]]) {
+              mesh_.point(v) = start[v];
+              fixed[v] = true;
+            } else {
+              mesh_.point(v) += move[v];
+            }
+          }
+          kept += std::count(collapsed.begin(), collapsed.end(), 1);
         }
+        PMP::remove_connected_components(mesh_, std::vector<std::size_t>{count}, fcc);
+        mesh_.remove_property_map(fcc);
+        mesh_.remove_property_map(fixed);
+        mesh_.collect_garbage();
+        if (kept > 0)
+          return fmt::format("{} x mean-curvature flow, time step {}; {} small pieces left as they were", settings_.shape_smooth_iterations,
+                             settings_.shape_smooth_time, kept);
         return fmt::format("{} x mean-curvature flow, time step {}", settings_.shape_smooth_iterations, settings_.shape_smooth_time);
       });
     }

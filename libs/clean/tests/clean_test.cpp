@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <functional>
 #include <limits>
 #include <numbers>
 #include <random>
@@ -331,6 +332,56 @@ TEST(Clean, SmoothingAndShapeSmoothingKeepVolume) {
     EXPECT_NEAR(r.report.after.volume, volume, 0.01 * volume) << io::EnumName(mode);
     EXPECT_TRUE(r.report.closed()) << io::EnumName(mode);
   }
+}
+
+/// Volume and centre of mass of the closed piece made of the triangles whose first vertex satisfies
+/// `inside` (a sum of signed tetrahedra from the origin).
+std::pair<double, Vec3d> PieceVolumeAndCentroid(const io::TriMesh& m, const std::function<bool(const Vec3d&)>& inside) {
+  double volume = 0;
+  Vec3d moment(0, 0, 0);
+  for (const auto& t : m.triangles) {
+    const Vec3d a(m.positions[t[0]]), b(m.positions[t[1]]), c(m.positions[t[2]]);
+    if (!inside(a)) continue;
+    const double v = Dot(a, Cross(b, c)) / 6;
+    volume += v;
+    moment += v * (a + b + c) / 4.0;
+  }
+  return {volume, volume != 0 ? moment / volume : moment};
+}
+
+TEST(Clean, ShapeSmoothingRestoresEachPieceWhereItStands) {
+  // A noisy ball and, 3 m away, a pebble that one flow step of this size would shrink by a third.
+  io::TriMesh m = procedural::Icosphere(1.0, 4);
+  procedural::AddRadialNoise(m, 0.01, 3);
+  io::TriMesh pebble = procedural::Icosphere(0.1, 3, {3, 0, 0});
+  procedural::AddRadialNoise(pebble, 0.002, 4, {3, 0, 0});
+  procedural::Append(m, pebble);
+  const auto is_ball = [](const Vec3d& p) { return p.x < 2; };
+  const auto is_pebble = [](const Vec3d& p) { return p.x > 2; };
+  const auto [ball_volume, ball_centre] = PieceVolumeAndCentroid(m, is_ball);
+  const auto [pebble_volume, pebble_centre] = PieceVolumeAndCentroid(m, is_pebble);
+
+  io::CleanupSettings s;
+  s.decimate = false;
+  s.smooth = io::MeshSmoothing::kNone;
+  s.shape_smooth_iterations = 3;
+  s.shape_smooth_time = 1e-3;
+  const CleanResult r = Clean(m, s);
+  const auto [ball_after, ball_centre_after] = PieceVolumeAndCentroid(r.mesh, is_ball);
+  const auto [pebble_after, pebble_centre_after] = PieceVolumeAndCentroid(r.mesh, is_pebble);
+  EXPECT_NEAR(ball_after, ball_volume, 2e-3 * ball_volume);
+  EXPECT_NEAR(pebble_after, pebble_volume, 2e-3 * pebble_volume);
+  EXPECT_LT(Norm(ball_centre_after - ball_centre), 1e-4);
+  EXPECT_LT(Norm(pebble_centre_after - pebble_centre), 1e-4);  // rescaling about the whole mesh's centroid moves it
+  // The ball was smoothed: its radius varies less than before.
+  const auto radius_spread = [](const io::TriMesh& mesh) {
+    double lo = 1e9, hi = 0;
+    for (const Vec3f& p : mesh.positions)
+      if (p.x < 2) lo = std::min(lo, double(Norm(p))), hi = std::max(hi, double(Norm(p)));
+    return hi - lo;
+  };
+  EXPECT_LT(radius_spread(r.mesh), 0.5 * radius_spread(m));
+  EXPECT_TRUE(r.report.closed());
 }
 
 // Bad input: empty mesh and NaN vertices are errors naming the problem (the tool adds the file).

@@ -189,7 +189,7 @@ struct CleanupSettings {
       s.smooth_iterations);
     f(Param{.name = "shape_smooth_iterations",
             .range = Range::Closed(0, 1000),
-            .help = "7. Mean-curvature-flow iterations, volume restored afterwards (0 = off)",
+            .help = "7. Mean-curvature-flow steps, each piece's volume restored after each (0 = off)",
             .flag = "--shape-smooth-iterations"},
       s.shape_smooth_iterations);
     f(Param{.name = "shape_smooth_time",
