@@ -150,6 +150,63 @@ double SignedVolume(const Mesh& mesh) {
   return volume;
 }
 
+/// CGAL's mean-curvature flow, `iterations` steps of `time` (m²), each closed piece's volume
+/// restored after every step where the piece stands. Returns how many pieces it left as they were.
+std::size_t SmoothShapeKeepingPieces(Mesh& mesh, double time, int iterations) {
+  auto fcc = mesh.add_property_map<FaceIndex, std::size_t>("f:rime_component", 0).first;
+  auto fixed = mesh.add_property_map<VertexIndex, bool>("v:rime_fixed", false).first;
+  const std::size_t count = PMP::connected_components(mesh, fcc);
+  const std::vector<double> target = MeasureComponents(mesh, fcc, count).volume;
+  // CGAL rescales the whole mesh about its centroid after each step unless two or more vertices
+  // are constrained; a constrained tetrahedron (piece `count`, removed after) turns that off.
+  const HalfedgeIndex anchor = CGAL::make_tetrahedron(Point(0, 0, 0), Point(1e-3, 0, 0), Point(0, 1e-3, 0), Point(0, 0, 1e-3), mesh);
+  for (VertexIndex v : CGAL::vertices_around_face(anchor, mesh)) fixed[v] = true;
+  fixed[mesh.target(mesh.next(mesh.opposite(anchor)))] = true;
+  for (FaceIndex f : CGAL::faces_around_face(anchor, mesh)) fcc[f] = count;
+  fcc[mesh.face(anchor)] = count;
+  std::vector<std::size_t> vertex_component(mesh.num_vertices(), count);
+  for (VertexIndex v : mesh.vertices()) {
+    if (mesh.halfedge(v) == Mesh::null_halfedge()) continue;
+    for (FaceIndex f : CGAL::faces_around_target(mesh.halfedge(v), mesh))
+      if (f != Mesh::null_face()) vertex_component[v] = fcc[f];
+  }
+  std::vector<Point> start(mesh.num_vertices());
+  std::size_t kept = 0;
+  // One step at a time, each piece's volume restored after it by offsetting the piece along
+  // its normals (loss / area). A piece that one step shrinks by half or more is a bead the
+  // flow collapses: it goes back to where the step found it and stays there.
+  for (int it = 0; it < iterations; ++it) {
+    for (VertexIndex v : mesh.vertices()) start[v] = mesh.point(v);
+    PMP::smooth_shape(mesh, time, params::number_of_iterations(1).vertex_is_constrained_map(fixed));
+    const ComponentMeasures now = MeasureComponents(mesh, fcc, count + 1);
+    std::vector<double> offset(count + 1, 0);
+    std::vector<char> collapsed(count + 1, 0);
+    for (std::size_t c = 0; c < count; ++c) {
+      if (!now.closed[c] || !(target[c] > 0)) continue;
+      if (!(now.volume[c] > 0.5 * target[c]) || !(now.area[c] > 0)) collapsed[c] = 1;
+      else offset[c] = (target[c] - now.volume[c]) / now.area[c];
+    }
+    std::vector<Kernel::Vector_3> move(mesh.num_vertices(), CGAL::NULL_VECTOR);
+    for (VertexIndex v : mesh.vertices())
+      if (offset[vertex_component[v]] != 0) move[v] = offset[vertex_component[v]] * PMP::compute_vertex_normal(v, mesh);
+    for (VertexIndex v : mesh.vertices()) {
+      if (fixed[v]) continue;
+      if (collapsed[vertex_component[v]]) {
+        mesh.point(v) = start[v];
+        fixed[v] = true;
+      } else {
+        mesh.point(v) += move[v];
+      }
+    }
+    kept += std::count(collapsed.begin(), collapsed.end(), 1);
+  }
+  PMP::remove_connected_components(mesh, std::vector<std::size_t>{count}, fcc);
+  mesh.remove_property_map(fcc);
+  mesh.remove_property_map(fixed);
+  mesh.collect_garbage();
+  return kept;
+}
+
 io::TriMesh ToTriMesh(Mesh& mesh) {
   mesh.collect_garbage();  // indices become 0..n-1
   io::TriMesh out;
@@ -348,59 +405,10 @@ class Chain {
     }
     if (settings_.shape_smooth_iterations > 0 && !mesh_.is_empty()) {
       Run("shape_smooth", [&] {
-        auto fcc = mesh_.add_property_map<FaceIndex, std::size_t>("f:rime_component", 0).first;
-        auto fixed = mesh_.add_property_map<VertexIndex, bool>("v:rime_fixed", false).first;
-        const std::size_t count = PMP::connected_components(mesh_, fcc);
-        const std::vector<double> target = MeasureComponents(mesh_, fcc, count).volume;
-        // CGAL rescales the whole mesh about its centroid after each step unless two or more vertices
-        // are constrained; a constrained tetrahedron (piece `count`, removed after) turns that off.
-        const HalfedgeIndex anchor = CGAL::make_tetrahedron(Point(0, 0, 0), Point(1e-3, 0, 0), Point(0, 1e-3, 0), Point(0, 0, 1e-3), mesh_);
-        for (VertexIndex v : CGAL::vertices_around_face(anchor, mesh_)) fixed[v] = true;
-        fixed[mesh_.target(mesh_.next(mesh_.opposite(anchor)))] = true;
-        for (FaceIndex f : CGAL::faces_around_face(anchor, mesh_)) fcc[f] = count;
-        fcc[mesh_.face(anchor)] = count;
-        std::vector<std::size_t> vertex_component(mesh_.num_vertices(), count);
-        for (VertexIndex v : mesh_.vertices())
-          for (FaceIndex f : CGAL::faces_around_target(mesh_.halfedge(v), mesh_))
-            if (f != Mesh::null_face()) vertex_component[v] = fcc[f];
-        std::vector<Point> start(mesh_.num_vertices());
-        std::size_t kept = 0;
-        // One step at a time, each piece's volume restored after it by offsetting the piece along
-        // its normals (loss / area). A piece that one step shrinks by more than a tenth is too
-        // small for the time step (MCF collapses it): it goes back to where the step found it and
-        // stays there.
-        for (int it = 0; it < settings_.shape_smooth_iterations; ++it) {
-          for (VertexIndex v : mesh_.vertices()) start[v] = mesh_.point(v);
-          PMP::smooth_shape(mesh_, settings_.shape_smooth_time, params::number_of_iterations(1).vertex_is_constrained_map(fixed));
-          const ComponentMeasures now = MeasureComponents(mesh_, fcc, count + 1);
-          std::vector<double> offset(count + 1, 0);
-          std::vector<char> collapsed(count + 1, 0);
-          for (std::size_t c = 0; c < count; ++c) {
-            if (!now.closed[c] || !(target[c] > 0)) continue;
-            if (!(now.volume[c] > 0.9 * target[c]) || !(now.area[c] > 0)) collapsed[c] = 1;
-            else offset[c] = (target[c] - now.volume[c]) / now.area[c];
-          }
-          std::vector<Kernel::Vector_3> move(mesh_.num_vertices(), CGAL::NULL_VECTOR);
-          for (VertexIndex v : mesh_.vertices())
-            if (offset[vertex_component[v]] != 0) move[v] = offset[vertex_component[v]] * PMP::compute_vertex_normal(v, mesh_);
-          for (VertexIndex v : mesh_.vertices()) {
-            if (fixed[v]) continue;
-            if (collapsed[vertex_component[v]]) {
-              mesh_.point(v) = start[v];
-              fixed[v] = true;
-            } else {
-              mesh_.point(v) += move[v];
-            }
-          }
-          kept += std::count(collapsed.begin(), collapsed.end(), 1);
-        }
-        PMP::remove_connected_components(mesh_, std::vector<std::size_t>{count}, fcc);
-        mesh_.remove_property_map(fcc);
-        mesh_.remove_property_map(fixed);
-        mesh_.collect_garbage();
+        const std::size_t kept = SmoothShapeKeepingPieces(mesh_, settings_.shape_smooth_time, settings_.shape_smooth_iterations);
         if (kept > 0)
-          return fmt::format("{} x mean-curvature flow, time step {}; {} small pieces left as they were", settings_.shape_smooth_iterations,
-                             settings_.shape_smooth_time, kept);
+          return fmt::format("{} x mean-curvature flow, time step {}; pieces left as they were (a step halved them): {}",
+                             settings_.shape_smooth_iterations, settings_.shape_smooth_time, kept);
         return fmt::format("{} x mean-curvature flow, time step {}", settings_.shape_smooth_iterations, settings_.shape_smooth_time);
       });
     }

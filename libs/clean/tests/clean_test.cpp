@@ -350,11 +350,11 @@ std::pair<double, Vec3d> PieceVolumeAndCentroid(const io::TriMesh& m, const std:
 }
 
 TEST(Clean, ShapeSmoothingRestoresEachPieceWhereItStands) {
-  // A noisy ball and, 3 m away, a pebble that one flow step of this size would shrink by a third.
+  // A noisy ball and, 3 m away, a pebble that one flow step of this size would collapse.
   io::TriMesh m = procedural::Icosphere(1.0, 4);
   procedural::AddRadialNoise(m, 0.01, 3);
-  io::TriMesh pebble = procedural::Icosphere(0.1, 3, {3, 0, 0});
-  procedural::AddRadialNoise(pebble, 0.002, 4, {3, 0, 0});
+  io::TriMesh pebble = procedural::Icosphere(0.05, 3, {3, 0, 0});
+  procedural::AddRadialNoise(pebble, 0.001, 4, {3, 0, 0});
   procedural::Append(m, pebble);
   const auto is_ball = [](const Vec3d& p) { return p.x < 2; };
   const auto is_pebble = [](const Vec3d& p) { return p.x > 2; };
@@ -382,6 +382,10 @@ TEST(Clean, ShapeSmoothingRestoresEachPieceWhereItStands) {
   };
   EXPECT_LT(radius_spread(r.mesh), 0.5 * radius_spread(m));
   EXPECT_TRUE(r.report.closed());
+  const auto op =
+      std::find_if(r.report.operations.begin(), r.report.operations.end(), [](const auto& o) { return o.name == "shape_smooth"; });
+  ASSERT_NE(op, r.report.operations.end());
+  EXPECT_NE(op->detail.find("left as they were (a step halved them): 1"), std::string::npos) << op->detail;
 }
 
 // Bad input: empty mesh and NaN vertices are errors naming the problem (the tool adds the file).
