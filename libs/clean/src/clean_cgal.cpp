@@ -406,10 +406,10 @@ class Chain {
     if (settings_.shape_smooth_iterations > 0 && !mesh_.is_empty()) {
       Run("shape_smooth", [&] {
         const std::size_t kept = SmoothShapeKeepingPieces(mesh_, settings_.shape_smooth_time, settings_.shape_smooth_iterations);
-        if (kept > 0)
-          return fmt::format("{} x mean-curvature flow, time step {}; pieces left as they were (a step halved them): {}",
-                             settings_.shape_smooth_iterations, settings_.shape_smooth_time, kept);
-        return fmt::format("{} x mean-curvature flow, time step {}", settings_.shape_smooth_iterations, settings_.shape_smooth_time);
+        std::string detail =
+            fmt::format("{} x mean-curvature flow, time step {}", settings_.shape_smooth_iterations, settings_.shape_smooth_time);
+        if (kept > 0) detail += fmt::format("; pieces left as they were (a step halved them): {}", kept);
+        return detail;
       });
     }
   }
