@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <type_traits>
 
 #include "rime/core/kernel.h"
 #include "rime/exec/parallel.h"
@@ -57,7 +58,7 @@ void DropChangedRows(const exec::Device& device, const Particles<T>& particles, 
   if (!work.diffusion_cache_valid || particles.boundary_moves || !(grid.origin == work.row_grid_origin) ||
       grid.inv_cell != work.row_grid_inv_cell) {
     work.row_length.SetZero();
-    work.row_pool_used = work.row_pool_after_reset = 0;
+    work.row_pool_used = work.row_pool_compacted = 0;
     work.row_grid_origin = grid.origin;
     work.row_grid_inv_cell = grid.inv_cell;
     return;
@@ -66,13 +67,43 @@ void DropChangedRows(const exec::Device& device, const Particles<T>& particles, 
   exec::ParallelFor(device, changed, kernels::SetListed{.list = work.change_list.data(), .value = 0u, .flags = work.row_length.data()});
 }
 
-// Lists the rows of the `count` particles of `list` that have none, appending them to the pool.
-// When the pool has grown to twice what it held after its last reset (dropped rows leave gaps),
-// it is emptied first and the rows of `list` are listed again (`may_reset` false: that relisting
-// must not empty it once more).
+// The pool's size at which it is compacted: twice what it held after its last compaction (rows
+// dropped near new ice leave gaps), plus a margin for small pools.
+inline std::size_t CompactionPoint(std::size_t compacted) { return 2 * compacted + (std::size_t(1) << 16); }
+
+// Moves the kept rows into fresh pools without the gaps, with room for `room` more pairs now and
+// capacity up to the next compaction. Copying is several times cheaper than listing the rows again
+// and keeps them and their values bit for bit; the pools move one at a time to bound the peak.
+template <class T>
+void CompactRows(const exec::Device& device, FreezingWork<T>& work, std::size_t room) {
+  const Index nb = Index(work.row_length.size());
+  DeviceArray<std::uint32_t> begin(device, nb);
+  const std::size_t kept = exec::ExclusiveScan(device, work.row_length.data(), begin.data(), nb);
+  const auto move = [&](auto& pool) {
+    using E = std::remove_reference_t<decltype(*pool.data())>;
+    DeviceArray<E> fresh(device);
+    fresh.reserve(CompactionPoint(kept + room));
+    fresh.resize(kept);
+    exec::ParallelFor(device, nb,
+                      kernels::MoveRows<E>{.from_begin = work.row_begin.data(),
+                                           .length = work.row_length.data(),
+                                           .to_begin = begin.data(),
+                                           .from = pool.data(),
+                                           .to = fresh.data()});
+    pool.swap(fresh);
+  };
+  move(work.row_pool);
+  move(work.row_x_grad);
+  move(work.row_denominator);
+  work.row_begin.swap(begin);
+  work.row_pool_used = kept;
+}
+
+// Lists the rows of the `count` particles of `list` that have none, appending them to the pool
+// (compacted first when it reaches its compaction point).
 template <class T>
 void ListRows(const exec::Device& device, const Particles<T>& particles, const CubicSpline<T>& kernel, const std::uint32_t* list,
-              Index count, FreezingWork<T>& work, DeviceArray<std::uint32_t>& slot, bool may_reset = true) {
+              Index count, FreezingWork<T>& work, DeviceArray<std::uint32_t>& slot) {
   work.row_flags.resize(count);
   exec::ParallelFor(device, count, kernels::MarkRowless{.list = list, .length = work.row_length.data(), .flags = work.row_flags.data()});
   const Index rowless = exec::ListFlagged(device, work.row_flags, count, slot, work.row_list);
@@ -83,22 +114,22 @@ void ListRows(const exec::Device& device, const Particles<T>& particles, const C
   exec::ParallelFor(device, rowless, exec::Gather<Vec3<T>>{particles.boundary_x, work.row_list.data(), work.row_x.data()});
   particles.boundary_grid->Query(work.row_x.data(), rowless, kernel.SupportRadius(), false, work.new_rows);
   const std::size_t pairs = work.new_rows.indices.size();
-  const bool reset =
-      may_reset && work.row_pool_used > 0 && work.row_pool_used + pairs > 2 * work.row_pool_after_reset + (std::size_t(1) << 16);
-  if (reset) {
-    work.row_length.SetZero();
-    work.row_pool_used = 0;
+  const bool compact = work.row_pool_used > 0 && work.row_pool_used + pairs > CompactionPoint(work.row_pool_compacted);
+  if (compact) CompactRows(device, work, pairs);
+  const std::size_t used = work.row_pool_used + pairs;
+  // An empty pool (the first listing) gets its room up to the compaction point at once too.
+  if (work.row_pool_compacted == 0) {
+    work.row_pool.reserve(CompactionPoint(used));
+    work.row_x_grad.reserve(CompactionPoint(used));
+    work.row_denominator.reserve(CompactionPoint(used));
   }
-  // An empty pool takes the lists' storage (storing them onto themselves) rather than a copy.
-  if (work.row_pool_used == 0) work.row_pool.swap(work.new_rows.indices);
-  work.row_pool.resize(work.row_pool_used + pairs);
-  work.row_x_grad.resize(work.row_pool_used + pairs);
-  work.row_denominator.resize(work.row_pool_used + pairs);
-  const std::uint32_t* indices = work.row_pool_used == 0 ? work.row_pool.data() : work.new_rows.indices.data();
+  work.row_pool.resize(used);
+  work.row_x_grad.resize(used);
+  work.row_denominator.resize(used);
   exec::ParallelFor(device, rowless,
                     kernels::StoreRows<T>{.list = work.row_list.data(),
                                           .offsets = work.new_rows.offsets.data(),
-                                          .indices = indices,
+                                          .indices = work.new_rows.indices.data(),
                                           .base = std::uint32_t(work.row_pool_used),
                                           .x = particles.boundary_x,
                                           .kernel = kernel,
@@ -108,12 +139,9 @@ void ListRows(const exec::Device& device, const Particles<T>& particles, const C
                                           .pool = work.row_pool.data(),
                                           .x_grad = work.row_x_grad.data(),
                                           .denominator = work.row_denominator.data()});
-  work.row_pool_used += pairs;
-  work.new_rows.indices.release();  // scratch that may hold a whole listing (or the pool's old storage)
-  if (work.row_pool_after_reset == 0 || reset) {
-    if (reset) ListRows(device, particles, kernel, list, count, work, slot, false);  // the rows the reset dropped
-    work.row_pool_after_reset = work.row_pool_used;
-  }
+  work.row_pool_used = used;
+  work.new_rows.indices.release();  // scratch that may hold a whole listing
+  if (work.row_pool_compacted == 0 || compact) work.row_pool_compacted = used;
 }
 
 // The film diffusion's region (spec §9.3: the wet particles and their one-ring) in

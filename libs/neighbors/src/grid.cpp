@@ -401,9 +401,11 @@ void UniformGrid<T>::BuildDenseCells() {
     coords(cell, c);
     for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], c[a]), hi[a] = std::max(hi[a], c[a]);
   }
-  // Dense only while the box costs at most a few words per point (sparse or far-flung clouds hash).
+  // Dense while the box costs at most a few words per point or 4 MiB in all (far-flung clouds hash):
+  // water spread thin over a large floor has 20 cells per point, and probing the hash table for
+  // each of a cell's 27 neighbours costs far more than filling such a box once per build.
   const double box = double(hi[0] - lo[0] + 1) * double(hi[1] - lo[1] + 1) * double(hi[2] - lo[2] + 1);
-  if (box > 4.0 * double(v.count) + 65536.0) return;
+  if (box > 4.0 * double(v.count) + double(1 << 20)) return;
   for (int a = 0; a < 3; ++a) v.dense_lo[a] = lo[a], v.dense_dims[a] = hi[a] - lo[a] + 1;
   dense_cells_.assign(std::size_t(box), GridView<T>::kNoCell);
   for (std::uint32_t cell = 0; cell < cells_; ++cell) {

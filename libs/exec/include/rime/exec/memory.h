@@ -49,19 +49,19 @@ class DeviceArray {
 
   /// Resizes, keeping the first min(old, new) elements; new elements are zero.
   void resize(std::size_t n) {
-    if (n <= capacity_) {
-      if (n > size_) FillZero(device_, data_ + size_, (n - size_) * sizeof(T));
-      size_ = n;
-      return;
-    }
-    const std::size_t new_capacity = std::max(n, capacity_ + capacity_ / 2);
-    T* fresh = static_cast<T*>(AllocateBytes(device_, new_capacity * sizeof(T)));
+    if (n > capacity_) reserve(std::max(n, capacity_ + capacity_ / 2));
+    if (n > size_) FillZero(device_, data_ + size_, (n - size_) * sizeof(T));
+    size_ = n;
+  }
+  /// Room for n elements without moving them again. The room beyond size() is not written (on the
+  /// CPU its pages are not touched until resize() hands them out).
+  void reserve(std::size_t n) {
+    if (n <= capacity_) return;
+    T* fresh = static_cast<T*>(AllocateBytes(device_, n * sizeof(T)));
     if (size_) CopyOnDevice(device_, fresh, data_, size_ * sizeof(T));
-    FillZero(device_, fresh + size_, (new_capacity - size_) * sizeof(T));
     FreeBytes(device_, data_);
     data_ = fresh;
-    capacity_ = new_capacity;
-    size_ = n;
+    capacity_ = n;
   }
   void assign(const std::vector<T>& host) {
     resize(host.size());

@@ -128,14 +128,14 @@ struct FreezingWork : exec::AttributeGroup<FreezingWork<T>> {
   bool diffusion_cache_valid = false;  // the solver clears it when the boundary moves or is restored
   // The film Laplacian's neighbour rows (kernels::NeighborRows), listed when a particle is first
   // evaluated and kept until the boundary moves or changes near it; row_pool[0, row_pool_used)
-  // holds them (rows dropped near new ice leave gaps until the pool is listed anew).
+  // holds them (rows dropped near new ice leave gaps until the pool is compacted).
   DeviceArray<std::uint32_t> row_begin, row_length, row_pool, row_flags, row_list;
   DeviceArray<T> row_x_grad, row_denominator;  // beside row_pool: kernels::NeighborRows
   DeviceArray<Vec3<T>> row_x;
   neighbors::NeighborList new_rows;
   std::size_t row_pool_used = 0;
-  std::size_t row_pool_after_reset = 0;  // what the pool held right after it was last emptied and refilled
-  Vec3<T> row_grid_origin{};             // the grid cells the rows were listed in (their order follows them)
+  std::size_t row_pool_compacted = 0;  // what the pool held right after it was last emptied or compacted
+  Vec3<T> row_grid_origin{};           // the grid cells the rows were listed in (their order follows them)
   T row_grid_inv_cell = 0;
 
   template <class Self, class F>

@@ -319,6 +319,20 @@ struct StoreRows {
   }
 };
 
+/// Copies particle b's kept row (length[b] entries from from_begin[b]) to to_begin[b] in a fresh
+/// pool: compacting the pool keeps every row and its stored values, bit for bit.
+template <class E>
+struct MoveRows {
+  const std::uint32_t* from_begin;
+  const std::uint32_t* length;
+  const std::uint32_t* to_begin;
+  const E* from;
+  E* to;
+  RIME_HD void operator()(Index b) const {
+    for (std::uint32_t m = 0; m < length[b]; ++m) to[to_begin[b] + m] = from[from_begin[b] + m];
+  }
+};
+
 /// Conservative SPH Laplacian of the film over the boundary graph (spec §9.3):
 /// L_b = 2 Σ_k V̄_bk (Γ_k − Γ_b)(−x_bk·∇W_bk)/(r²+εh²); also the stability bound λ_b. The
 /// neighbours come from the rows, in the grid's order, so the sums are those of a grid query.
@@ -502,7 +516,8 @@ struct KeepUnfrozen {
   X(rime::freeze::kernels::JoinRegion<T>)         \
   X(rime::freeze::kernels::MarkAffected<T>)       \
   X(rime::freeze::kernels::GatherListed<T>)       \
-  X(rime::freeze::kernels::StoreRows<T>)
+  X(rime::freeze::kernels::StoreRows<T>)          \
+  X(rime::freeze::kernels::MoveRows<T>)
 
 #define RIME_FREEZE_KERNELS(X)                    \
   RIME_FREEZE_KERNELS_T(X, float)                 \
@@ -512,4 +527,5 @@ struct KeepUnfrozen {
   X(rime::freeze::kernels::WetChanges)            \
   X(rime::freeze::kernels::AddStale)              \
   X(rime::freeze::kernels::SetListed)             \
-  X(rime::freeze::kernels::MarkRowless)
+  X(rime::freeze::kernels::MarkRowless)           \
+  X(rime::freeze::kernels::MoveRows<std::uint32_t>)
