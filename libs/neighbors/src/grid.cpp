@@ -53,6 +53,11 @@ void CpuBounds(const Vec3<T>* points, Index n, Vec3<T>& lo, Vec3<T>& hi) {
   hi = box.finite ? box.hi : Vec3<T>(nan, nan, nan);
 }
 
+template <class T>
+void RequireFinite(const Vec3<T>& lo, const Vec3<T>& hi) {
+  if (!IsFinite(lo) || !IsFinite(hi)) throw Error(ExitCode::kDiverged, "neighbor grid: a particle position is NaN or infinite");
+}
+
 // The candidates of one query cell (the points of its up to 27 neighbor cells, in the order the
 // kernels visit them) as padded structure-of-arrays. Padding points lie far away, so blocks of
 // kLanes candidates need no tail handling.
@@ -339,16 +344,13 @@ void UniformGrid<T>::BuildImpl(const Vec3<T>* points, Index n, T cell_size, cons
   } else {
     CpuBounds(points, n, lo, hi);
   }
-  if (!IsFinite(lo) || !IsFinite(hi)) throw Error(ExitCode::kDiverged, "neighbor grid: a particle position is NaN or infinite");
+  RequireFinite(lo, hi);
   const T extent = std::max({hi.x - lo.x, hi.y - lo.y, hi.z - lo.z});
   if (extent / cell_size > T(kMaxCellsPerAxis - 4))
     throw Error(ExitCode::kBadInput, fmt::format("particles span {:.4g} m, more than 2^21 neighbor cells of {:.4g} m per axis; "
                                                  "limit the domain or use a larger spacing",
                                                  double(extent), double(cell_size)));
-  const bool use_fixed = fixed_origin && lo.x > fixed_origin->x && lo.y > fixed_origin->y && lo.z > fixed_origin->z &&
-                         (hi.x - fixed_origin->x) / cell_size < T(kMaxCellsPerAxis - 4) &&
-                         (hi.y - fixed_origin->y) / cell_size < T(kMaxCellsPerAxis - 4) &&
-                         (hi.z - fixed_origin->z) / cell_size < T(kMaxCellsPerAxis - 4);
+  const bool use_fixed = fixed_origin && OnLattice(lo, hi, *fixed_origin);
   view_.origin = use_fixed
                      ? *fixed_origin
                      : Vec3<T>{std::floor(lo.x / cell_size) * cell_size - cell_size, std::floor(lo.y / cell_size) * cell_size - cell_size,
@@ -361,7 +363,13 @@ void UniformGrid<T>::BuildImpl(const Vec3<T>* points, Index n, T cell_size, cons
   const T span = std::max({hi.x - view_.origin.x, hi.y - view_.origin.y, hi.z - view_.origin.z}) / cell_size + T(2);
   const int bits_per_axis = std::min(kMortonBits, static_cast<int>(std::bit_width(static_cast<std::uint64_t>(span) + 1)));
   exec::SortPairs(device_, keys_.data(), sorted_index_.data(), n, 3 * bits_per_axis);
+  IndexCells(n);
+}
 
+template <class T>
+void UniformGrid<T>::IndexCells(Index n) {
+  dense_cells_.clear();
+  view_.dense_cells = nullptr;
   flags_.resize(n);
   cell_of_slot_.resize(n);
   exec::ParallelFor(device_, n, kernels::MarkCellStarts{keys_.data(), flags_.data()});
@@ -385,6 +393,47 @@ void UniformGrid<T>::BuildImpl(const Vec3<T>* points, Index n, T cell_size, cons
   view_.cell_start = cell_start_.data();
   view_.sorted_index = sorted_index_.data();
   if (!device_.is_cuda()) BuildDenseCells();
+}
+
+template <class T>
+bool UniformGrid<T>::OnLattice(const Vec3<T>& lo, const Vec3<T>& hi, const Vec3<T>& origin) const {
+  const T limit = T(kMaxCellsPerAxis - 4);
+  return lo.x > origin.x && lo.y > origin.y && lo.z > origin.z && (hi.x - origin.x) / cell_size_ < limit &&
+         (hi.y - origin.y) / cell_size_ < limit && (hi.z - origin.z) / cell_size_ < limit;
+}
+
+template <class T>
+void UniformGrid<T>::Append(const Vec3<T>* points, Index n, const Vec3<T>& origin) {
+  const Index first = view_.count, added = n - first;
+  // Merging pays while the new points are few; the device and a reordered grid build anew.
+  if (device_.is_cuda() || in_order_ || first == 0 || added <= 0 || added > first / 4 || !(view_.origin == origin))
+    return BuildImpl(points, n, cell_size_, &origin);
+  Vec3<T> lo, hi;
+  CpuBounds(points + first, added, lo, hi);
+  RequireFinite(lo, hi);
+  if (!OnLattice(lo, hi, origin)) return BuildImpl(points, n, cell_size_, &origin);
+  view_.points = points;
+  view_.count = static_cast<std::uint32_t>(n);
+  std::vector<std::uint64_t> new_keys(added);
+  std::vector<std::uint32_t> new_index(added);
+  exec::ParallelFor(device_, added, kernels::CellKeys<T>{points + first, origin, view_.inv_cell, new_keys.data(), new_index.data()});
+  exec::SortPairs(device_, new_keys.data(), new_index.data(), added, 3 * kMortonBits);
+  // Merged from the back; a new point goes after the old ones of its cell, as a stable sort puts it.
+  keys_.resize(n);
+  sorted_index_.resize(n);
+  std::uint64_t* keys = keys_.data();
+  std::uint32_t* index = sorted_index_.data();
+  Index old = first - 1, fresh = added - 1;
+  for (Index k = n - 1; fresh >= 0; --k) {
+    if (old >= 0 && keys[old] > new_keys[fresh]) {
+      keys[k] = keys[old];
+      index[k] = index[old--];
+    } else {
+      keys[k] = new_keys[fresh];
+      index[k] = new_index[fresh--] + static_cast<std::uint32_t>(first);
+    }
+  }
+  IndexCells(n);
 }
 
 template <class T>

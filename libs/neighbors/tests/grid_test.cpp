@@ -212,3 +212,44 @@ TEST(UniformGrid, CpuQueryGridMatchesTheKernelsExactly) {
 
 }  // namespace
 }  // namespace rime::neighbors
+
+namespace rime::neighbors {
+namespace {
+
+// Appending points (new ice) to a grid gives the grid a full build makes: the same slot order,
+// cells and lists, in their order. A point below the lattice's origin falls back to a full build.
+TEST(UniformGrid, AppendMatchesBuildingAnew) {
+  std::mt19937 rng(91);
+  const exec::Device device = exec::Device::Cpu();
+  const float cell = 0.05f;
+  const Vec3f origin(-1.0f, -1.0f, -1.0f);
+  for (bool clustered : {false, true}) {
+    auto points = RandomCloud<float>(4000, clustered, 0.0f, rng);
+    const std::size_t before = points.size();
+    for (const Vec3f& p : RandomCloud<float>(300, clustered, 0.0f, rng)) points.push_back(p);
+    points.push_back(points[7]);  // a duplicate of an old point: it goes after it in its cell
+    for (bool below_origin : {false, true}) {
+      if (below_origin) points.back() = Vec3f(-2.0f, 0.0f, 0.0f);
+      exec::DeviceArray<Vec3f> d(device, points);
+      UniformGrid<float> appended(device), built(device);
+      appended.Build(d.data(), Index(before), cell, origin);
+      appended.Append(d.data(), Index(points.size()), origin);
+      built.Build(d.data(), Index(points.size()), cell, origin);
+      ASSERT_EQ(appended.size(), built.size());
+      EXPECT_EQ(appended.aligned_with(built), true);
+      EXPECT_EQ(appended.cell_count(), built.cell_count());
+      const std::vector<std::uint32_t> a(appended.order(), appended.order() + points.size());
+      const std::vector<std::uint32_t> b(built.order(), built.order() + points.size());
+      EXPECT_EQ(a, b) << "clustered=" << clustered << " below_origin=" << below_origin;
+      NeighborList la(device), lb(device);
+      appended.QueryGrid(built, cell, false, la);
+      built.QueryGrid(built, cell, false, lb);
+      EXPECT_EQ(la.offsets.ToHost(), lb.offsets.ToHost());
+      EXPECT_EQ(la.indices.ToHost(), lb.indices.ToHost());
+      EXPECT_GT(la.pairs(), points.size());
+    }
+  }
+}
+
+}  // namespace
+}  // namespace rime::neighbors

@@ -48,6 +48,10 @@ class UniformGrid {
   /// cells, which lets QueryGrid work cell by cell. Falls back to a computed origin (and says so
   /// through aligned_with) when a point lies below `origin`.
   void Build(const Vec3<T>* points, Index n, T cell_size, const Vec3<T>& origin);
+  /// After points were appended to the array binned last (points [0, size()) unchanged, at
+  /// `points` now), bins [size(), n) too: the same grid as Build(points, n, cell_size(), origin),
+  /// merged into the sorted cells rather than sorted anew when the new points are few.
+  void Append(const Vec3<T>* points, Index n, const Vec3<T>& origin);
   bool aligned_with(const UniformGrid& other) const { return view_.origin == other.view_.origin && cell_size_ == other.cell_size_; }
 
   /// sorted slot -> original index: the Z-curve order, for callers that reorder their arrays.
@@ -77,6 +81,8 @@ class UniformGrid {
  private:
   void BuildImpl(const Vec3<T>* points, Index n, T cell_size, const Vec3<T>* fixed_origin);
   void CpuQueryByCell(const UniformGrid& queries, T radius, bool exclude_self, NeighborList& out, const PairKernelArrays<T>* values) const;
+  void IndexCells(Index n);  // cell starts, hash table and dense box of the sorted keys_
+  bool OnLattice(const Vec3<T>& lo, const Vec3<T>& hi, const Vec3<T>& origin) const;
   void BuildDenseCells();
 
   exec::Device device_;
