@@ -263,7 +263,8 @@ Index FreezeStep(const exec::Device& device, const io::Scene& scene, const Parti
   // The water moved since its grid was binned; searching cell by cell scans all 27 cells around
   // each boundary cell, so it also finds water that moved into the support from a cell that the
   // per-point search would skip as out of range.
-  work.active_grid.Build(work.active_x.data(), active, particles.fluid_grid->cell_size(), particles.fluid_grid->view().origin);
+  work.active_grid.BuildSubset(*particles.boundary_grid, work.boundary_active.data(), slot.data(), work.active_x.data(), active,
+                               particles.fluid_grid->cell_size(), particles.fluid_grid->view().origin);
   particles.fluid_grid->QueryGrid(work.active_grid, support, false, work.bf);
   exec::ParallelFor(device, active,
                     kernels::MarkFluidFromBoundary{

@@ -437,6 +437,35 @@ void UniformGrid<T>::Append(const Vec3<T>* points, Index n, const Vec3<T>& origi
 }
 
 template <class T>
+void UniformGrid<T>::BuildSubset(const UniformGrid& parent, const std::uint32_t* flags, const std::uint32_t* slot, const Vec3<T>* points,
+                                 Index count, T cell_size, const Vec3<T>& origin) {
+  if (device_.is_cuda() || parent.in_order_ || count == 0 || parent.cell_size_ != cell_size || !(parent.view_.origin == origin))
+    return BuildImpl(points, count, cell_size, &origin);
+  cell_size_ = cell_size;
+  view_ = GridView<T>{};
+  view_.points = points;
+  view_.count = static_cast<std::uint32_t>(count);
+  view_.inv_cell = T(1) / cell_size;
+  view_.origin = origin;
+  in_order_ = false;
+  // The parent's slots in order, keeping the flagged points: already sorted by cell, and by index
+  // within a cell (the parent's are ascending, and so are their places in the subset).
+  keys_.resize(count);
+  sorted_index_.resize(count);
+  const std::uint64_t* parent_keys = parent.keys_.data();
+  const std::uint32_t* parent_index = parent.sorted_index_.data();
+  Index k = 0;
+  for (Index s = 0; s < parent.size(); ++s) {
+    const std::uint32_t b = parent_index[s];
+    if (!flags[b]) continue;
+    keys_.data()[k] = parent_keys[s];
+    sorted_index_.data()[k++] = slot[b];
+  }
+  if (k != count) throw Error(ExitCode::kFailure, "neighbor grid: the subset's count does not match its flags");
+  IndexCells(count);
+}
+
+template <class T>
 void UniformGrid<T>::BuildDenseCells() {
   GridView<T>& v = view_;
   const auto coords = [&](std::uint32_t cell, std::int64_t c[3]) {

@@ -253,3 +253,44 @@ TEST(UniformGrid, AppendMatchesBuildingAnew) {
 
 }  // namespace
 }  // namespace rime::neighbors
+
+namespace rime::neighbors {
+namespace {
+
+// A grid of some of another grid's points, taken from its cells, is the grid a build of those
+// points makes: the same slot order, cells and lists.
+TEST(UniformGrid, BuildSubsetMatchesBuildingTheSubset) {
+  std::mt19937 rng(17);
+  const exec::Device device = exec::Device::Cpu();
+  const float cell = 0.05f;
+  const Vec3f origin(-1.0f, -1.0f, -1.0f);
+  for (bool clustered : {false, true}) {
+    const auto points = RandomCloud<float>(4000, clustered, 0.0f, rng);
+    std::vector<std::uint32_t> flags(points.size()), slot(points.size());
+    std::vector<Vec3f> subset;
+    for (std::size_t b = 0; b < points.size(); ++b) {
+      flags[b] = rng() % 3 == 0;
+      slot[b] = std::uint32_t(subset.size());
+      if (flags[b]) subset.push_back(points[b]);
+    }
+    exec::DeviceArray<Vec3f> d(device, points), ds(device, subset);
+    UniformGrid<float> parent(device), taken(device), built(device);
+    parent.Build(d.data(), Index(points.size()), cell, origin);
+    taken.BuildSubset(parent, flags.data(), slot.data(), ds.data(), Index(subset.size()), cell, origin);
+    built.Build(ds.data(), Index(subset.size()), cell, origin);
+    EXPECT_TRUE(taken.aligned_with(built));
+    EXPECT_EQ(taken.cell_count(), built.cell_count());
+    EXPECT_EQ(std::vector<std::uint32_t>(taken.order(), taken.order() + subset.size()),
+              std::vector<std::uint32_t>(built.order(), built.order() + subset.size()))
+        << "clustered=" << clustered;
+    NeighborList lt(device), lb(device);
+    parent.QueryGrid(taken, cell, false, lt);
+    parent.QueryGrid(built, cell, false, lb);
+    EXPECT_EQ(lt.offsets.ToHost(), lb.offsets.ToHost());
+    EXPECT_EQ(lt.indices.ToHost(), lb.indices.ToHost());
+    EXPECT_GT(lt.pairs(), subset.size());
+  }
+}
+
+}  // namespace
+}  // namespace rime::neighbors

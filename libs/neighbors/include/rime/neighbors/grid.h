@@ -52,6 +52,11 @@ class UniformGrid {
   /// `points` now), bins [size(), n) too: the same grid as Build(points, n, cell_size(), origin),
   /// merged into the sorted cells rather than sorted anew when the new points are few.
   void Append(const Vec3<T>* points, Index n, const Vec3<T>& origin);
+  /// The grid Build(points, count, cell_size, origin) makes of a subset of `parent`'s points
+  /// (flags[b] != 0 for its members, slot[b] the place of member b in `points`, in increasing b),
+  /// taken from the parent's sorted cells rather than sorted anew.
+  void BuildSubset(const UniformGrid& parent, const std::uint32_t* flags, const std::uint32_t* slot, const Vec3<T>* points, Index count,
+                   T cell_size, const Vec3<T>& origin);
   bool aligned_with(const UniformGrid& other) const { return view_.origin == other.view_.origin && cell_size_ == other.cell_size_; }
 
   /// sorted slot -> original index: the Z-curve order, for callers that reorder their arrays.
