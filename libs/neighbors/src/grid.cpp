@@ -322,14 +322,7 @@ void UniformGrid<T>::Build(const Vec3<T>* points, Index n, T cell_size, const Ve
 template <class T>
 void UniformGrid<T>::BuildImpl(const Vec3<T>* points, Index n, T cell_size, const Vec3<T>* fixed_origin) {
   if (!(cell_size > 0)) throw Error(ExitCode::kFailure, "neighbor grid: cell size must be positive");
-  cell_size_ = cell_size;
-  view_ = GridView<T>{};
-  view_.points = points;
-  view_.count = static_cast<std::uint32_t>(n);
-  view_.inv_cell = T(1) / cell_size;
-  cells_ = 0;
-  dense_cells_.clear();
-  in_order_ = false;
+  Clear(points, n, cell_size);
   if (n == 0) return;
 
   // Bounding box -> origin one cell below the minimum, so every point sits in a cell >= 1.
@@ -364,6 +357,18 @@ void UniformGrid<T>::BuildImpl(const Vec3<T>* points, Index n, T cell_size, cons
   const int bits_per_axis = std::min(kMortonBits, static_cast<int>(std::bit_width(static_cast<std::uint64_t>(span) + 1)));
   exec::SortPairs(device_, keys_.data(), sorted_index_.data(), n, 3 * bits_per_axis);
   IndexCells(n);
+}
+
+template <class T>
+void UniformGrid<T>::Clear(const Vec3<T>* points, Index n, T cell_size) {
+  cell_size_ = cell_size;
+  view_ = GridView<T>{};
+  view_.points = points;
+  view_.count = static_cast<std::uint32_t>(n);
+  view_.inv_cell = T(1) / cell_size;
+  cells_ = 0;
+  dense_cells_.clear();
+  in_order_ = false;
 }
 
 template <class T>
@@ -441,13 +446,8 @@ void UniformGrid<T>::BuildSubset(const UniformGrid& parent, const std::uint32_t*
                                  Index count, T cell_size, const Vec3<T>& origin) {
   if (device_.is_cuda() || parent.in_order_ || count == 0 || parent.cell_size_ != cell_size || !(parent.view_.origin == origin))
     return BuildImpl(points, count, cell_size, &origin);
-  cell_size_ = cell_size;
-  view_ = GridView<T>{};
-  view_.points = points;
-  view_.count = static_cast<std::uint32_t>(count);
-  view_.inv_cell = T(1) / cell_size;
+  Clear(points, count, cell_size);
   view_.origin = origin;
-  in_order_ = false;
   // The parent's slots in order, keeping the flagged points: already sorted by cell, and by index
   // within a cell (the parent's are ascending, and so are their places in the subset).
   keys_.resize(count);

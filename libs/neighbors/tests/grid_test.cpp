@@ -216,8 +216,33 @@ TEST(UniformGrid, CpuQueryGridMatchesTheKernelsExactly) {
 namespace rime::neighbors {
 namespace {
 
-// Appending points (new ice) to a grid gives the grid a full build makes: the same slot order,
-// cells and lists, in their order. A point below the lattice's origin falls back to a full build.
+// `made` is the grid `built` is: the same slot order and cells, and the same lists (in their
+// order) as the target of `other`'s points and as the queries into `other`.
+void ExpectSameGrid(const UniformGrid<float>& made, const UniformGrid<float>& built, const UniformGrid<float>& other) {
+  const exec::Device device = exec::Device::Cpu();
+  ASSERT_EQ(made.size(), built.size());
+  EXPECT_TRUE(made.aligned_with(built));
+  EXPECT_EQ(made.cell_count(), built.cell_count());
+  EXPECT_EQ(std::vector<std::uint32_t>(made.order(), made.order() + made.size()),
+            std::vector<std::uint32_t>(built.order(), built.order() + built.size()));
+  for (bool as_target : {true, false}) {
+    NeighborList a(device), b(device);
+    const float radius = built.cell_size();
+    if (as_target) {
+      made.QueryGrid(other, radius, false, a);
+      built.QueryGrid(other, radius, false, b);
+    } else {
+      other.QueryGrid(made, radius, false, a);
+      other.QueryGrid(built, radius, false, b);
+    }
+    EXPECT_EQ(a.offsets.ToHost(), b.offsets.ToHost()) << "as_target=" << as_target;
+    EXPECT_EQ(a.indices.ToHost(), b.indices.ToHost()) << "as_target=" << as_target;
+    EXPECT_GT(a.pairs(), std::min(made.size(), other.size())) << "as_target=" << as_target;
+  }
+}
+
+// Appending points (new ice) to a grid gives the grid a full build makes. A point below the
+// lattice's origin falls back to a full build.
 TEST(UniformGrid, AppendMatchesBuildingAnew) {
   std::mt19937 rng(91);
   const exec::Device device = exec::Device::Cpu();
@@ -230,41 +255,26 @@ TEST(UniformGrid, AppendMatchesBuildingAnew) {
     points.push_back(points[7]);  // a duplicate of an old point: it goes after it in its cell
     for (bool below_origin : {false, true}) {
       if (below_origin) points.back() = Vec3f(-2.0f, 0.0f, 0.0f);
+      SCOPED_TRACE(testing::Message() << "clustered=" << clustered << " below_origin=" << below_origin);
       exec::DeviceArray<Vec3f> d(device, points);
       UniformGrid<float> appended(device), built(device);
       appended.Build(d.data(), Index(before), cell, origin);
       appended.Append(d.data(), Index(points.size()), origin);
       built.Build(d.data(), Index(points.size()), cell, origin);
-      ASSERT_EQ(appended.size(), built.size());
-      EXPECT_EQ(appended.aligned_with(built), true);
-      EXPECT_EQ(appended.cell_count(), built.cell_count());
-      const std::vector<std::uint32_t> a(appended.order(), appended.order() + points.size());
-      const std::vector<std::uint32_t> b(built.order(), built.order() + points.size());
-      EXPECT_EQ(a, b) << "clustered=" << clustered << " below_origin=" << below_origin;
-      NeighborList la(device), lb(device);
-      appended.QueryGrid(built, cell, false, la);
-      built.QueryGrid(built, cell, false, lb);
-      EXPECT_EQ(la.offsets.ToHost(), lb.offsets.ToHost());
-      EXPECT_EQ(la.indices.ToHost(), lb.indices.ToHost());
-      EXPECT_GT(la.pairs(), points.size());
+      ExpectSameGrid(appended, built, built);
     }
   }
 }
 
-}  // namespace
-}  // namespace rime::neighbors
-
-namespace rime::neighbors {
-namespace {
-
 // A grid of some of another grid's points, taken from its cells, is the grid a build of those
-// points makes: the same slot order, cells and lists.
+// points makes.
 TEST(UniformGrid, BuildSubsetMatchesBuildingTheSubset) {
   std::mt19937 rng(17);
   const exec::Device device = exec::Device::Cpu();
   const float cell = 0.05f;
   const Vec3f origin(-1.0f, -1.0f, -1.0f);
   for (bool clustered : {false, true}) {
+    SCOPED_TRACE(testing::Message() << "clustered=" << clustered);
     const auto points = RandomCloud<float>(4000, clustered, 0.0f, rng);
     std::vector<std::uint32_t> flags(points.size()), slot(points.size());
     std::vector<Vec3f> subset;
@@ -278,17 +288,7 @@ TEST(UniformGrid, BuildSubsetMatchesBuildingTheSubset) {
     parent.Build(d.data(), Index(points.size()), cell, origin);
     taken.BuildSubset(parent, flags.data(), slot.data(), ds.data(), Index(subset.size()), cell, origin);
     built.Build(ds.data(), Index(subset.size()), cell, origin);
-    EXPECT_TRUE(taken.aligned_with(built));
-    EXPECT_EQ(taken.cell_count(), built.cell_count());
-    EXPECT_EQ(std::vector<std::uint32_t>(taken.order(), taken.order() + subset.size()),
-              std::vector<std::uint32_t>(built.order(), built.order() + subset.size()))
-        << "clustered=" << clustered;
-    NeighborList lt(device), lb(device);
-    parent.QueryGrid(taken, cell, false, lt);
-    parent.QueryGrid(built, cell, false, lb);
-    EXPECT_EQ(lt.offsets.ToHost(), lb.offsets.ToHost());
-    EXPECT_EQ(lt.indices.ToHost(), lb.indices.ToHost());
-    EXPECT_GT(lt.pairs(), subset.size());
+    ExpectSameGrid(taken, built, parent);
   }
 }
 

@@ -85,8 +85,8 @@ void Simulation<T>::ConvertToIce(const DeviceArray<std::uint32_t>& frozen_list, 
   const Index kept = n - frozen;
   exec::ListFlagged(device_, s.keep, n, s.slot, s.order);
   s.GatherFluid(device_, kept);
-  // The boundary set changed: bin the new ice into its grid and recompute the volumes of every boundary particle
-  // within 2h of new ice, the new ice included (spec §3, §9.7).
+  // The boundary set changed: merge the new ice into its grid and recompute the volumes of every
+  // boundary particle within 2h of new ice, the new ice included (spec §3, §9.7).
   const T support = T(2 * scene_.fluid.smoothing_length());
   s.boundary_grid.Append(s.boundary.x.data(), s.nb(), lattice_origin_);
   neighbors::NeighborList near(device_);

@@ -134,7 +134,7 @@ struct FreezingWork : exec::AttributeGroup<FreezingWork<T>> {
   DeviceArray<Vec3<T>> row_x;
   neighbors::NeighborList new_rows;
   std::size_t row_pool_used = 0;
-  std::size_t row_pool_compacted = 0;  // what the pool held right after it was last emptied or compacted
+  std::size_t row_pool_compacted = 0;  // what the pool held after its first listing or last compaction
   Vec3<T> row_grid_origin{};           // the grid cells the rows were listed in (their order follows them)
   T row_grid_inv_cell = 0;
 
