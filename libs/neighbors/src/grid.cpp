@@ -379,25 +379,34 @@ void UniformGrid<T>::IndexCells(Index n) {
   cell_of_slot_.resize(n);
   exec::ParallelFor(device_, n, kernels::MarkCellStarts{keys_.data(), flags_.data()});
   cells_ = exec::ExclusiveScan(device_, flags_.data(), cell_of_slot_.data(), n);
+  cell_start_.resize(cells_ + 1);
+  const std::uint32_t end = static_cast<std::uint32_t>(n);
+  exec::CopyToDevice(device_, cell_start_.data() + cells_, &end, sizeof end);
+  view_.cell_start = cell_start_.data();
+  view_.sorted_index = sorted_index_.data();
+  view_.table_keys = nullptr;
+  view_.table_cells = nullptr;
+  view_.table_mask = 0;
+  const kernels::InsertCells insert{keys_.data(), flags_.data(), cell_of_slot_.data(), cell_start_.data(), nullptr, nullptr, 0};
+  if (!device_.is_cuda()) {  // cell starts first: a dense box needs no hash table
+    exec::ParallelFor(device_, n, insert);
+    BuildDenseCells();
+    if (view_.dense_cells) return;
+  }
 
   const std::uint32_t table_size = std::bit_ceil(static_cast<std::uint32_t>(2 * cells_ + 16));
   table_keys_.resize(table_size);
   table_cells_.resize(table_size);
   std::vector<std::uint64_t> empty(table_size, kEmptySlot);  // all-ones fill
   table_keys_.assign(empty);
-  cell_start_.resize(cells_ + 1);
-  const std::uint32_t end = static_cast<std::uint32_t>(n);
-  exec::CopyToDevice(device_, cell_start_.data() + cells_, &end, sizeof end);
-  exec::ParallelFor(device_, n,
-                    kernels::InsertCells{keys_.data(), flags_.data(), cell_of_slot_.data(), cell_start_.data(), table_keys_.data(),
-                                         table_cells_.data(), table_size - 1});
-
+  kernels::InsertCells hashed = insert;
+  hashed.table_keys = table_keys_.data();
+  hashed.table_cells = table_cells_.data();
+  hashed.table_mask = table_size - 1;
+  exec::ParallelFor(device_, n, hashed);
   view_.table_keys = table_keys_.data();
   view_.table_cells = table_cells_.data();
   view_.table_mask = table_size - 1;
-  view_.cell_start = cell_start_.data();
-  view_.sorted_index = sorted_index_.data();
-  if (!device_.is_cuda()) BuildDenseCells();
 }
 
 template <class T>

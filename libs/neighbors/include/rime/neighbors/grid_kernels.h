@@ -164,7 +164,8 @@ struct MarkCellStarts {
   RIME_HD void operator()(Index i) const { flags[i] = (i == 0 || sorted_keys[i] != sorted_keys[i - 1]) ? 1u : 0u; }
 };
 
-/// For every cell start: record the start slot and insert the cell into the hash table.
+/// For every cell start: record the start slot and insert the cell into the hash table (when
+/// there is one: the CPU reads a dense box instead where it can).
 struct InsertCells {
   const std::uint64_t* sorted_keys;
   const std::uint32_t* flags;
@@ -177,6 +178,7 @@ struct InsertCells {
     if (!flags[i]) return;
     const std::uint32_t cell = cell_of_slot[i];
     cell_start[cell] = static_cast<std::uint32_t>(i);
+    if (!table_keys) return;
     const std::uint64_t key = sorted_keys[i];
     std::uint32_t slot = HashSlot(key, table_mask);
     while (exec::AtomicCas(&table_keys[slot], kEmptySlot, key) != kEmptySlot) slot = (slot + 1) & table_mask;
