@@ -17,6 +17,7 @@
 #endif
 
 #include "rime/core/error.h"
+#include "rime/exec/attributes.h"
 #include "rime/exec/kernel_list.h"
 #include "rime/exec/kernels.h"
 #include "rime/exec/parallel.h"
@@ -387,7 +388,7 @@ void UniformGrid<T>::IndexCells(Index n) {
   view_.table_keys = nullptr;
   view_.table_cells = nullptr;
   view_.table_mask = 0;
-  const kernels::InsertCells insert{keys_.data(), flags_.data(), cell_of_slot_.data(), cell_start_.data(), nullptr, nullptr, 0};
+  kernels::InsertCells insert{keys_.data(), flags_.data(), cell_of_slot_.data(), cell_start_.data(), nullptr, nullptr, 0};
   if (!device_.is_cuda()) {  // cell starts first: a dense box needs no hash table
     exec::ParallelFor(device_, n, insert);
     BuildDenseCells();
@@ -397,16 +398,14 @@ void UniformGrid<T>::IndexCells(Index n) {
   const std::uint32_t table_size = std::bit_ceil(static_cast<std::uint32_t>(2 * cells_ + 16));
   table_keys_.resize(table_size);
   table_cells_.resize(table_size);
-  std::vector<std::uint64_t> empty(table_size, kEmptySlot);  // all-ones fill
-  table_keys_.assign(empty);
-  kernels::InsertCells hashed = insert;
-  hashed.table_keys = table_keys_.data();
-  hashed.table_cells = table_cells_.data();
-  hashed.table_mask = table_size - 1;
-  exec::ParallelFor(device_, n, hashed);
-  view_.table_keys = table_keys_.data();
-  view_.table_cells = table_cells_.data();
-  view_.table_mask = table_size - 1;
+  exec::FillValue(device_, table_keys_, 0, kEmptySlot);
+  insert.table_keys = table_keys_.data();
+  insert.table_cells = table_cells_.data();
+  insert.table_mask = table_size - 1;
+  exec::ParallelFor(device_, n, insert);
+  view_.table_keys = insert.table_keys;
+  view_.table_cells = insert.table_cells;
+  view_.table_mask = insert.table_mask;
 }
 
 template <class T>

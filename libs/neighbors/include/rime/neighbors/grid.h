@@ -87,7 +87,7 @@ class UniformGrid {
   void BuildImpl(const Vec3<T>* points, Index n, T cell_size, const Vec3<T>* fixed_origin);
   void CpuQueryByCell(const UniformGrid& queries, T radius, bool exclude_self, NeighborList& out, const PairKernelArrays<T>* values) const;
   void Clear(const Vec3<T>* points, Index n, T cell_size);  // an empty grid over `points`, before its cells are indexed
-  void IndexCells(Index n);                                 // cell starts, hash table and dense box of the sorted keys_
+  void IndexCells(Index n);                                 // cell starts, then a dense box (CPU) or a hash table
   bool OnLattice(const Vec3<T>& lo, const Vec3<T>& hi, const Vec3<T>& origin) const;
   void BuildDenseCells();
 

@@ -44,7 +44,7 @@ template <class T>
 struct GridView {
   Vec3<T> origin;  // world position of cell (1,1,1)'s lower corner minus one cell (cells start at 1)
   T inv_cell = 0;
-  const std::uint64_t* table_keys = nullptr;   // hash slot -> cell key (kEmptySlot = empty)
+  const std::uint64_t* table_keys = nullptr;   // hash slot -> cell key (kEmptySlot = empty); none with dense_cells
   const std::uint32_t* table_cells = nullptr;  // hash slot -> cell index
   std::uint32_t table_mask = 0;
   const std::uint32_t* cell_start = nullptr;    // cell index -> first sorted slot; cell_start[cells] = n
