@@ -150,9 +150,31 @@ double SignedVolume(const Mesh& mesh) {
   return volume;
 }
 
+/// Faces of `mesh` that cross another face, pairs among `ignored` faces or touching the piece
+/// `skip` left out. Sequential for the reason given in Chain::SelfIntersections.
+template <typename ComponentMap>
+std::vector<FaceIndex> CrossingFaces(const Mesh& mesh, const ComponentMap& fcc, std::size_t skip, const std::vector<char>& ignored) {
+  std::vector<std::pair<FaceIndex, FaceIndex>> pairs;
+  PMP::self_intersections<CGAL::Sequential_tag>(faces(mesh), mesh, std::back_inserter(pairs));
+  std::vector<FaceIndex> crossing;
+  for (const auto& [a, b] : pairs) {
+    if (fcc[a] == skip || fcc[b] == skip) continue;
+    if (!ignored.empty() && ignored[a] && ignored[b]) continue;
+    crossing.push_back(a);
+    crossing.push_back(b);
+  }
+  return crossing;
+}
+
+struct ShapeSmoothing {
+  std::size_t kept_pieces = 0;      // pieces a step would have halved, left as they were
+  std::size_t unfolded_places = 0;  // vertices put back where a step made two faces cross
+};
+
 /// CGAL's mean-curvature flow, `iterations` steps of `time` (m²), each closed piece's volume
-/// restored after every step where the piece stands. Returns how many pieces it left as they were.
-std::size_t SmoothShapeKeepingPieces(Mesh& mesh, double time, int iterations) {
+/// restored after every step where the piece stands. Where a step makes faces cross (the two
+/// sides of a thin sheet), their vertices go back to where the step found them and stay there.
+ShapeSmoothing SmoothShapeKeepingPieces(Mesh& mesh, double time, int iterations) {
   auto fcc = mesh.add_property_map<FaceIndex, std::size_t>("f:rime_component", 0).first;
   auto fixed = mesh.add_property_map<VertexIndex, bool>("v:rime_fixed", false).first;
   const std::size_t count = PMP::connected_components(mesh, fcc);
@@ -171,7 +193,10 @@ std::size_t SmoothShapeKeepingPieces(Mesh& mesh, double time, int iterations) {
       if (f != Mesh::null_face()) vertex_component[v] = fcc[f];
   }
   std::vector<Point> start(mesh.num_vertices());
-  std::size_t kept = 0;
+  ShapeSmoothing result;
+  // Faces that crossed before the flow are not the flow's doing: only pairs with another face count.
+  std::vector<char> crossed_before(mesh.num_faces(), 0);
+  for (FaceIndex f : CrossingFaces(mesh, fcc, count, {})) crossed_before[f] = 1;
   // One step at a time, each piece's volume restored after it by offsetting the piece along
   // its normals (loss / area). A piece that one step shrinks by half or more is a bead the
   // flow collapses: it goes back to where the step found it and stays there.
@@ -198,13 +223,31 @@ std::size_t SmoothShapeKeepingPieces(Mesh& mesh, double time, int iterations) {
         mesh.point(v) += move[v];
       }
     }
-    kept += std::count(collapsed.begin(), collapsed.end(), 1);
+    result.kept_pieces += std::count(collapsed.begin(), collapsed.end(), 1);
+    // Put back the crossing faces' vertices, then their neighbours' if that is not enough.
+    for (int ring = 0; ring < 3; ++ring) {
+      const std::vector<FaceIndex> crossing = CrossingFaces(mesh, fcc, count, crossed_before);
+      if (crossing.empty()) break;
+      std::vector<VertexIndex> back;
+      for (FaceIndex f : crossing)
+        for (VertexIndex v : CGAL::vertices_around_face(mesh.halfedge(f), mesh)) {
+          back.push_back(v);
+          if (ring > 0)
+            for (VertexIndex u : CGAL::vertices_around_target(mesh.halfedge(v), mesh)) back.push_back(u);
+        }
+      for (VertexIndex v : back) {
+        if (fixed[v]) continue;
+        mesh.point(v) = start[v];
+        fixed[v] = true;
+        ++result.unfolded_places;
+      }
+    }
   }
   PMP::remove_connected_components(mesh, std::vector<std::size_t>{count}, fcc);
   mesh.remove_property_map(fcc);
   mesh.remove_property_map(fixed);
   mesh.collect_garbage();
-  return kept;
+  return result;
 }
 
 io::TriMesh ToTriMesh(Mesh& mesh) {
@@ -405,10 +448,11 @@ class Chain {
     }
     if (settings_.shape_smooth_iterations > 0 && !mesh_.is_empty()) {
       Run("shape_smooth", [&] {
-        const std::size_t kept = SmoothShapeKeepingPieces(mesh_, settings_.shape_smooth_time, settings_.shape_smooth_iterations);
+        const ShapeSmoothing done = SmoothShapeKeepingPieces(mesh_, settings_.shape_smooth_time, settings_.shape_smooth_iterations);
         std::string detail =
             fmt::format("{} x mean-curvature flow, time step {}", settings_.shape_smooth_iterations, settings_.shape_smooth_time);
-        if (kept > 0) detail += fmt::format("; pieces left as they were (a step halved them): {}", kept);
+        if (done.kept_pieces > 0) detail += fmt::format("; pieces left as they were (a step halved them): {}", done.kept_pieces);
+        if (done.unfolded_places > 0) detail += fmt::format("; vertices put back where a step made faces cross: {}", done.unfolded_places);
         return detail;
       });
     }
