@@ -92,7 +92,9 @@ void Simulation<T>::Restore(const io::ParticleFrame& f) {
     // so recomputing them all would not resume bit-identically).
     s.boundary.psi.resize(s.nb());
     s.ice_count = Index(ice.size());
-    if (!ice.empty()) s.boundary_grid.Build(s.boundary.x.data(), s.nb(), T(2 * scene_.fluid.smoothing_length()), lattice_origin_);
+    // Binned anew from the rows as read, so the grid cannot point at other particles than the
+    // start-up one did (the same grid when the rows come in start-up order and hold no ice).
+    s.boundary_grid.Build(s.boundary.x.data(), s.nb(), T(2 * scene_.fluid.smoothing_length()), lattice_origin_);
     FinishBoundaryVolumes();
     s.freezing_work->diffusion_cache_valid = false;
   }
