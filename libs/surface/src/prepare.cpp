@@ -86,7 +86,8 @@ struct LaneSums {
       const float rx = xj - x[l], ry = yj - y[l], rz = zj - z[l];
       const float r2 = rx * rx + ry * ry + rz * rz;
       const bool in = (r2 < r2max) & (l != self);
-      const float w = in ? kernel.w_norm * CubicSpline<float>::ShapeBranchFree(std::sqrt(r2) * kernel.inv_h) : 0.0f;
+      const float q = std::sqrt(r2) * kernel.inv_h;  // for every lane: a blend, not a branch
+      const float w = in ? kernel.w_norm * CubicSpline<float>::ShapeBranchFree(q) : 0.0f;
       weight[l] += w;
       fx[l] += rx * w, fy[l] += ry * w, fz[l] += rz * w;
       if constexpr (kSecondMoments) {
