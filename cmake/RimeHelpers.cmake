@@ -103,3 +103,22 @@ function(rime_add_benchmark stage)
                                              RIME_SOURCE_DIR="${PROJECT_SOURCE_DIR}")
   rime_target_defaults(${name})
 endfunction()
+
+# rime_expect_vectorised(SOURCE ...): the loop after each RIME_IVDEP line of these sources must
+# vectorise; the unit test Vectorised.<file> reads GCC's report of the compile, so a flag or code
+# change that leaves a lane loop scalar fails a test, not only a benchmark. GCC Release builds only.
+function(rime_expect_vectorised)
+  if(NOT RIME_BUILD_TESTS OR NOT CMAKE_CXX_COMPILER_ID STREQUAL "GNU" OR NOT CMAKE_BUILD_TYPE STREQUAL "Release")
+    return()
+  endif()
+  set(folder ${PROJECT_BINARY_DIR}/vectorised)
+  file(MAKE_DIRECTORY ${folder})
+  foreach(source ${ARGN})
+    get_filename_component(path ${source} ABSOLUTE)
+    get_filename_component(stem ${source} NAME_WE)
+    set(report ${folder}/${stem}.txt)
+    set_property(SOURCE ${source} APPEND PROPERTY COMPILE_OPTIONS -fopt-info-vec-optimized=${report})
+    rime_add_program_test(Vectorised.${stem} KIND unit TIMEOUT 60
+                          COMMAND ${CMAKE_COMMAND} -DSOURCE=${path} -DREPORT=${report} -P ${PROJECT_SOURCE_DIR}/cmake/check_vectorised.cmake)
+  endforeach()
+endfunction()
