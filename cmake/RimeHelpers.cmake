@@ -104,10 +104,11 @@ function(rime_add_benchmark stage)
   rime_target_defaults(${name})
 endfunction()
 
-# rime_expect_vectorised(SOURCE ...): the loop after each RIME_IVDEP line of these sources must
-# vectorise; the unit test Vectorised.<file> reads GCC's report of the compile, so a flag or code
-# change that leaves a lane loop scalar fails a test, not only a benchmark. GCC Release builds only.
-function(rime_expect_vectorised)
+# rime_vectorised_lanes(TARGET SOURCE ...): TARGET's C++ gets sqrt without errno and compares that may
+# not trap (no IEEE arithmetic relaxed), without which GCC leaves x86-64-v3 lane loops scalar; in GCC
+# Release builds the unit test Vectorised.<file> fails when a loop after RIME_IVDEP in a SOURCE does.
+function(rime_vectorised_lanes target)
+  target_compile_options(${target} PRIVATE $<$<COMPILE_LANGUAGE:CXX>:-fno-math-errno -fno-trapping-math>)
   if(NOT RIME_BUILD_TESTS OR NOT CMAKE_CXX_COMPILER_ID STREQUAL "GNU" OR NOT CMAKE_BUILD_TYPE STREQUAL "Release")
     return()
   endif()
